@@ -1,0 +1,93 @@
+#!/usr/bin/env python
+"""Data-pipeline benchmark (run by hand, never in CI). Prints medians.
+
+1. Parse + FK + cache every BVH of a directory (default: ../shared/data/bandai/dataset-2), cold
+   (empty cache) and warm (cache hits).
+2. Batches of 24 paper-size windows (1024 frames at step 8 -> T 128, FPS x0.5/1/1.5 and rotation
+   augmentation, noisy spline curves) from cached arrays. Reference PyTorch loader on this machine
+   kind: 0.58-0.86 s per batch (spec §6 item 9).
+
+  JAX_PLATFORMS=cpu python bench/bench_data.py [--data DIR] [--repeats 3]
+"""
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+from motiongan_jax import data, kinematics, synthetic  # noqa: E402
+from motiongan_jax.config import DataConfig  # noqa: E402
+from motiongan_jax.representation import layout_from_skeleton, to_rows  # noqa: E402
+
+SHARED = Path(os.environ.get("MOTIONGAN_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+
+def bench_preprocess(data_dir: Path, repeats: int) -> None:
+    entries = data.discover(data_dir, "bandai")
+    cold, warm = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            os.environ["MOTIONGAN_CACHE"] = tmp
+            t0 = time.perf_counter()
+            for p, lab in entries:
+                data.preprocess_clip(p, lab, 0.01, 0)
+            cold.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            for p, lab in entries:
+                data.preprocess_clip(p, lab, 0.01, 0)
+            warm.append(time.perf_counter() - t0)
+    print(f"preprocess {len(entries)} files of {data_dir.name}: cold (parse+FK+cache write) median "
+          f"{statistics.median(cold):.2f} s, warm (cache hits) median {statistics.median(warm):.2f} s "
+          f"over {repeats} runs")
+
+
+def bench_batches(repeats: int) -> None:
+    # Four long 120 fps clips, like the reference's own timing set-up (2400-3300 frames each).
+    clips = []
+    styles = list(synthetic.STYLES)[:4]
+    for i, name in enumerate(styles):
+        motion = synthetic.generate_clip(synthetic.STYLES[name], key_or_seed=i, num_frames=2400 + 300 * i, fps=120.0)
+        layout = layout_from_skeleton(motion.skeleton, 0.056444)
+        root, pose = to_rows(kinematics.world_positions(motion)[1:] * 0.056444, layout)
+        clips.append(data.Clip(name, data.FileLabel(name, 1), 120.0, root.astype(np.float32),
+                               pose.astype(np.float32), layout))
+    cfg = DataConfig(frame_nums=1024, frame_step=8, control_point_interval=256, window_stride=3)
+    arrays = data.build_arrays(clips, tuple(styles), cfg)
+    sample = jax.jit(data.make_sample_batch(cfg, 24))
+    key = jax.random.key(0)
+    t0 = time.perf_counter()
+    jax.block_until_ready(sample(arrays, key, 0))
+    compile_s = time.perf_counter() - t0
+    times = []
+    for step in range(1, 1 + 50 * repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(sample(arrays, key, step))
+        times.append(time.perf_counter() - t0)
+    med = statistics.median(times)
+    print(f"batch of 24 paper-size windows (T 128, fps+rotation aug, noisy curves): median {med * 1e3:.2f} ms "
+          f"over {len(times)} batches (compile {compile_s:.1f} s); reference 580-860 ms -> {0.58 / med:.0f}-{0.86 / med:.0f}x")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--data", type=Path, default=SHARED / "bandai" / "dataset-2")
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    print(f"jax {jax.__version__} on {jax.devices()[0].platform}, {os.cpu_count()} cpus")
+    if args.data.is_dir():
+        bench_preprocess(args.data, args.repeats)
+    else:
+        print(f"skipping preprocessing benchmark: {args.data} not found")
+    bench_batches(args.repeats)
+
+
+if __name__ == "__main__":
+    main()

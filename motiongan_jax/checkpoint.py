@@ -1,0 +1,62 @@
+"""Checkpoints with orbax-checkpoint: atomic saves, the last K kept, self-describing metadata.
+
+A checkpoint holds the train state (arrays only: PRNG keys are derived from the seed and the
+step, never saved) and a JSON `meta` item: the config, the style names and the row layout, so
+that generation and analysis can rebuild the model without the data. Orbax writes each step
+into a temporary directory and renames it when complete, so a process killed mid-save leaves no
+checkpoint that `latest_step` would pick up.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jax
+import numpy as np
+import orbax.checkpoint as ocp
+
+
+class CheckpointError(RuntimeError):
+    """Missing or incompatible checkpoint; the message says which and why."""
+
+
+def manager(directory: str | Path, keep: int = 3) -> ocp.CheckpointManager:
+    options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True, enable_async_checkpointing=False)
+    return ocp.CheckpointManager(Path(directory).absolute(), options=options, item_names=("state", "meta"))
+
+
+def save(mngr: ocp.CheckpointManager, step: int, state, meta: dict) -> None:
+    mngr.save(step, args=ocp.args.Composite(state=ocp.args.StandardSave(state), meta=ocp.args.JsonSave(meta)))
+    mngr.wait_until_finished()
+
+
+def read_meta(mngr: ocp.CheckpointManager, step: int | None = None) -> tuple[int, dict]:
+    step = mngr.latest_step() if step is None else step
+    if step is None:
+        raise CheckpointError(f"no checkpoint in {mngr.directory}")
+    meta = mngr.restore(step, args=ocp.args.Composite(meta=ocp.args.JsonRestore()))["meta"]
+    return step, meta
+
+
+def restore(mngr: ocp.CheckpointManager, step: int, like_state):
+    """Restore the state at `step` with the structure, shapes and dtypes of `like_state`."""
+    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like_state)
+    try:
+        out = mngr.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))
+    except (ValueError, KeyError, TypeError) as err:
+        raise CheckpointError(f"checkpoint {mngr.directory}/{step} does not fit this model: {err}") from err
+    return out["state"]
+
+
+def check_compatible(meta: dict, expected: dict, where: str) -> None:
+    """Refuse a checkpoint made for another skeleton, style list or architecture."""
+    for key in ("style_names", "joint_names", "parents", "model", "window_T"):
+        if key in expected and _jsonable(meta.get(key)) != _jsonable(expected[key]):
+            raise CheckpointError(
+                f"checkpoint in {where} is incompatible: its {key} is {meta.get(key)!r}, "
+                f"this run needs {expected[key]!r}")
+
+
+def _jsonable(x):
+    return json.loads(json.dumps(x, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))

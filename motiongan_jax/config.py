@@ -1,0 +1,226 @@
+"""Configs as data: one frozen dataclass tree, four sizes in configs/*.py.
+
+Every field can be overridden from the command line with `--set section.field=value`
+(see `override`). `validate` rejects bad values before anything is compiled.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import hashlib
+import importlib.util
+import json
+from pathlib import Path
+from typing import Any
+
+LABEL_RULES = ("paper", "bandai", "cmu", "synthetic")
+GAN_LOSSES = ("bce_prob", "bce_logit")
+
+
+class ConfigError(ValueError):
+    """A config value is invalid; the message names the field."""
+
+
+@dataclasses.dataclass(frozen=True)
+class DataConfig:
+    # BVH directory; None trains on the embedded default (procedural) dataset.
+    data_dir: str | None = None
+    # How style labels are read from file names: paper `<Style>_*.bvh`, bandai
+    # `dataset-N_<content>_<style>_<trial>.bvh`, cmu `<subject>_<trial>.bvh` via the shipped table,
+    # synthetic: the embedded dataset's own names (same shape as paper).
+    label_rule: str = "synthetic"
+    # Style names in label-index order; empty means "every style found, sorted".
+    styles: tuple[str, ...] = ()
+    # Metres per file unit; None infers it from the label rule (cmu/paper 0.056444, bandai 0.01).
+    units_to_m: float | None = None
+    # Leading frames dropped from every clip (CMU frame 0 is a T-pose).
+    start_offset: int = 1
+    # Frames between spline control points of the input curve (paper: 256 at 120 fps).
+    control_point_interval: int = 256
+    # Window length in source frames and the subsampling step; T = frame_nums // frame_step.
+    frame_nums: int = 1024
+    frame_step: int = 8
+    # Frames between consecutive window starts.
+    window_stride: int = 3
+    # FPS augmentation: playback-speed factors drawn uniformly (paper: 0.5, 1, 1.5).
+    augment_fps: bool = True
+    fps_factors: tuple[float, ...] = (0.5, 1.0, 1.5)
+    # Random rotation about the vertical axis.
+    rotate: bool = True
+    # Curve noise as a fraction of the step (timing) and of the point spacing (space); paper 0.02.
+    curve_noise: float = 0.02
+    # Validation split: trials whose number % val_modulus == val_remainder are held out;
+    # val_modulus 0 holds nothing out (the paper trained on every CMU trial).
+    val_modulus: int = 4
+    val_remainder: int = 0
+    # Seed of the embedded default dataset.
+    synthetic_seed: int = 0
+
+    @property
+    def window_T(self) -> int:
+        return self.frame_nums // self.frame_step
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelConfig:
+    # Channel base ("top" in the reference): G's first conv width, D's first conv width.
+    top: int = 64
+    # Kernel width along time.
+    kw: int = 5
+    w_dim: int = 64
+    z_dim: int = 64
+    # Where z comes from: "transform" (N(0, I) through the Latent Transform), "zeros".
+    use_z: str = "transform"
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    batch_size: int = 24
+    num_steps: int = 200_000
+    lr_g: float = 2e-4
+    lr_d: float = 1e-4
+    beta1: float = 0.5
+    beta2: float = 0.999
+    # Loss weights as in the paper (its data were in CMU units).
+    w_g_adv: float = 1.0
+    w_g_cls: float = 5.0
+    w_g_curve: float = 0.1
+    w_g_bone: float = 0.1
+    w_d_adv: float = 1.0
+    w_d_cls: float = 5.0
+    # Lengths in the curve and bone losses are divided by this (metres) so that the paper's
+    # weights keep their relative size when we train in metres: 1 CMU unit = 0.056444 m.
+    loss_length_unit: float = 0.056444
+    # Number of points of the curve loss (paper: 4).
+    curve_points: int = 4
+    # "bce_prob" reproduces the reference (BCE on sigmoid/softmax probabilities);
+    # "bce_logit" is the numerically stable form.
+    gan_loss: str = "bce_prob"
+    seed: int = 0
+    log_every: int = 100
+    preview_every: int = 5000
+    checkpoint_every: int = 20000
+    keep_checkpoints: int = 3
+
+
+@dataclasses.dataclass(frozen=True)
+class Config:
+    name: str = "paper"
+    data: DataConfig = DataConfig()
+    model: ModelConfig = ModelConfig()
+    train: TrainConfig = TrainConfig()
+
+
+def load_config(path: str | Path, check: bool = True) -> Config:
+    """Import a configs/*.py file and call its `get_config()`; validate unless check=False
+    (the command line validates after applying its overrides)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    spec = importlib.util.spec_from_file_location(f"_motiongan_config_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    if not hasattr(module, "get_config"):
+        raise ConfigError(f"{path} defines no get_config()")
+    cfg = module.get_config()
+    return validate(cfg) if check else cfg
+
+
+def _parse_value(text: str, current: Any, field: str) -> Any:
+    if current is None or isinstance(current, str):
+        if text.lower() in ("none", "null"):
+            return None
+        return text
+    try:
+        value = ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        raise ConfigError(f"{field}: cannot parse {text!r} as {type(current).__name__}") from None
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{field}: expected True/False, got {text!r}")
+    elif isinstance(current, int):
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ConfigError(f"{field}: expected an integer, got {text!r}")
+    elif isinstance(current, float):
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ConfigError(f"{field}: expected a number, got {text!r}")
+        value = float(value)
+    elif isinstance(current, tuple):
+        if isinstance(value, (str, int, float)):
+            value = (value,)
+        value = tuple(value)
+    return value
+
+
+def override(cfg: Config, assignments: list[str]) -> Config:
+    """Apply `section.field=value` (or `name=value`) strings; unknown fields are errors."""
+    for item in assignments:
+        if "=" not in item:
+            raise ConfigError(f"override {item!r} is not of the form field=value")
+        key, text = item.split("=", 1)
+        parts = key.strip().split(".")
+        if len(parts) == 1 and parts[0] == "name":
+            cfg = dataclasses.replace(cfg, name=text)
+            continue
+        if len(parts) != 2 or parts[0] not in ("data", "model", "train"):
+            raise ConfigError(f"unknown config field {key!r} (use data.X, model.X or train.X)")
+        section = getattr(cfg, parts[0])
+        names = {f.name for f in dataclasses.fields(section)}
+        if parts[1] not in names:
+            raise ConfigError(f"unknown config field {key!r}; {parts[0]} has: {', '.join(sorted(names))}")
+        value = _parse_value(text, getattr(section, parts[1]), key)
+        cfg = dataclasses.replace(cfg, **{parts[0]: dataclasses.replace(section, **{parts[1]: value})})
+    return cfg
+
+
+def validate(cfg: Config) -> Config:
+    d, m, t = cfg.data, cfg.model, cfg.train
+
+    def need(ok: bool, field: str, msg: str) -> None:
+        if not ok:
+            raise ConfigError(f"{field}: {msg}")
+
+    need(d.label_rule in LABEL_RULES, "data.label_rule", f"unknown style rule {d.label_rule!r}; one of {LABEL_RULES}")
+    need(d.data_dir is None or Path(d.data_dir).is_dir(), "data.data_dir", f"data directory {d.data_dir!r} does not exist")
+    need(d.frame_step >= 1, "data.frame_step", "must be >= 1")
+    need(d.frame_nums % d.frame_step == 0, "data.frame_nums", "must be a multiple of data.frame_step")
+    need(d.window_T % 8 == 0 and d.window_T >= 16, "data.frame_nums",
+         f"window length T = frame_nums // frame_step = {d.window_T} must be a multiple of 8 and >= 16")
+    need(d.control_point_interval >= 2, "data.control_point_interval", "must be >= 2")
+    need(d.window_stride >= 1, "data.window_stride", "must be >= 1")
+    need(d.start_offset >= 0, "data.start_offset", "must be >= 0")
+    need(len(d.fps_factors) >= 1 and all(f > 0 for f in d.fps_factors), "data.fps_factors", "must be positive")
+    need(d.curve_noise >= 0, "data.curve_noise", "must be >= 0")
+    need(d.units_to_m is None or d.units_to_m > 0, "data.units_to_m", "must be positive")
+    need(d.val_modulus == 0 or (d.val_modulus >= 2 and 0 <= d.val_remainder < d.val_modulus),
+         "data.val_modulus", "need 0 (no split) or modulus >= 2 with 0 <= remainder < modulus")
+    need(d.data_dir is not None or d.label_rule == "synthetic", "data.data_dir",
+         f"label rule {d.label_rule!r} needs a data directory (--data DIR); only 'synthetic' has a default")
+    need(len(set(d.styles)) == len(d.styles), "data.styles", "duplicate style names")
+    need(m.top >= 1 and m.top % 1 == 0, "model.top", "must be a positive integer")
+    need(m.kw >= 1 and m.kw % 2 == 1, "model.kw", "must be odd")
+    need(m.w_dim >= 1 and m.z_dim >= 1, "model.w_dim", "w_dim and z_dim must be positive")
+    need(m.use_z in ("transform", "zeros"), "model.use_z", "one of transform, zeros")
+    need(t.batch_size >= 1, "train.batch_size", "must be >= 1")
+    need(t.num_steps >= 1, "train.num_steps", "must be >= 1")
+    need(t.lr_g > 0 and t.lr_d > 0, "train.lr_g", "learning rates must be positive")
+    need(0 <= t.beta1 < 1 and 0 <= t.beta2 < 1, "train.beta1", "betas must be in [0, 1)")
+    need(t.loss_length_unit > 0, "train.loss_length_unit", "must be positive")
+    need(t.curve_points >= 1 and d.window_T % t.curve_points == 0, "train.curve_points",
+         "must divide the window length T")
+    need(t.gan_loss in GAN_LOSSES, "train.gan_loss", f"one of {GAN_LOSSES}")
+    need(t.log_every >= 1 and t.checkpoint_every >= 1 and t.preview_every >= 0, "train.log_every",
+         "log/checkpoint intervals must be >= 1")
+    need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")
+    return cfg
+
+
+def to_dict(cfg: Config) -> dict:
+    return dataclasses.asdict(cfg)
+
+
+def config_hash(cfg: Config) -> str:
+    """Short stable hash of every field: names a config in reports and caches."""
+    blob = json.dumps(to_dict(cfg), sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()[:12]

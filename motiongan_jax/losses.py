@@ -1,0 +1,121 @@
+"""GAN, class, curve and bone losses (spec §4.2). Pure jnp.
+
+Two forms of the GAN and class losses, chosen by `TrainConfig.gan_loss`:
+
+* "bce_prob" reproduces the reference: PyTorch `BCELoss` on sigmoid probabilities (adversarial)
+  and on *softmax probabilities* against one-hot targets averaged over B x C (class), each log
+  clamped at >= -100. Its gradient is PyTorch's too: (p - t) / max(p (1 - p), 1e-12) per element.
+* "bce_logit": sigmoid BCE on logits and softmax cross-entropy, numerically stable.
+
+Units. Data are in metres, the paper's loss weights were tuned on CMU units (1 unit = 0.056444 m).
+The curve and bone losses divide every length by `unit` (TrainConfig.loss_length_unit) so their
+size relative to the GAN terms is the paper's.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from motiongan_jax import curves
+
+GAN_LOSSES = ("bce_prob", "bce_logit")
+REAL_TARGET = 0.9  # label smoothing of the reference
+FAKE_TARGET = 0.1
+_LOG_CLAMP = -100.0
+_BCE_GRAD_EPS = 1e-12
+
+
+@jax.custom_vjp
+def _bce_elementwise(p: jax.Array, t: jax.Array) -> jax.Array:
+    log_p = jnp.maximum(jnp.log(p), _LOG_CLAMP)
+    log_1mp = jnp.maximum(jnp.log1p(-p), _LOG_CLAMP)
+    return -(t * log_p + (1.0 - t) * log_1mp)
+
+
+def _bce_fwd(p, t):
+    return _bce_elementwise(p, t), (p, t)
+
+
+def _bce_bwd(res, g):
+    p, t = res
+    # PyTorch binary_cross_entropy_backward: the clamp does not zero the gradient.
+    dp = g * (p - t) / jnp.maximum(p * (1.0 - p), _BCE_GRAD_EPS)
+    dt = g * (jnp.maximum(jnp.log1p(-p), _LOG_CLAMP) - jnp.maximum(jnp.log(p), _LOG_CLAMP))
+    return dp, dt
+
+
+_bce_elementwise.defvjp(_bce_fwd, _bce_bwd)
+
+
+def bce_prob(p: jax.Array, target) -> jax.Array:
+    """PyTorch `BCELoss` (mean): -mean[t log p + (1-t) log(1-p)], logs clamped at >= -100."""
+    p = jnp.asarray(p)
+    return jnp.mean(_bce_elementwise(p, jnp.broadcast_to(jnp.asarray(target, p.dtype), p.shape)))
+
+
+def adversarial_loss(logits_B: jax.Array, target: float, mode: str = "bce_prob") -> jax.Array:
+    """BCE of D's real/fake logit against a constant target (0.9 real, 0.1 fake)."""
+    if mode == "bce_prob":
+        return bce_prob(jax.nn.sigmoid(logits_B), target)
+    if mode == "bce_logit":
+        return jnp.mean(optax.sigmoid_binary_cross_entropy(logits_B, jnp.full_like(logits_B, target)))
+    raise ValueError(f"unknown gan loss {mode!r}; one of {GAN_LOSSES}")
+
+
+def class_loss(logits_BxC: jax.Array, labels_B: jax.Array, mode: str = "bce_prob") -> jax.Array:
+    """Style-class loss. bce_prob: BCE(softmax, one-hot) averaged over B x C (the reference's,
+    not a cross-entropy); bce_logit: softmax cross-entropy averaged over B."""
+    if mode == "bce_prob":
+        onehot = jax.nn.one_hot(labels_B, logits_BxC.shape[-1], dtype=logits_BxC.dtype)
+        return bce_prob(jax.nn.softmax(logits_BxC, axis=-1), onehot)
+    if mode == "bce_logit":
+        return jnp.mean(optax.softmax_cross_entropy_with_integer_labels(logits_BxC, labels_B))
+    raise ValueError(f"unknown gan loss {mode!r}; one of {GAN_LOSSES}")
+
+
+def curve_loss(root_vel_BxTx3: jax.Array, curve_BxTx3: jax.Array, points: int = 4,
+               unit: float = 1.0) -> jax.Array:
+    """Trajectory loss: the integrated root velocity must hit `points` curve samples.
+
+    With s = T / points, x̂_k = c[0] + Σ_{τ=1}^{k·s−1} v̂[τ] is compared with c[k·s−1] for
+    k = 1..points: 0.5 (MSE_x + MSE_z) per point (mean over the batch), summed over points.
+    Convention (spec §6 item 6): v[0] is ignored, as in `curves.integrate` and everywhere else in
+    this package; the reference's sum also includes v̂[0] (whose input counterpart is a duplicate).
+    Lengths are divided by `unit`.
+    """
+    t = curve_BxTx3.shape[1]
+    if t % points:
+        raise ValueError(f"curve_points={points} must divide T={t}")
+    s = t // points
+    idx = np.arange(1, points + 1) * s - 1
+    pos = curves.integrate(curve_BxTx3[:, 0], root_vel_BxTx3)[:, idx]
+    diff = (pos - curve_BxTx3[:, idx]) / unit  # B x points x 3
+    mse_xz = jnp.mean(jnp.square(diff[..., (0, 2)]), axis=0)  # points x 2
+    return jnp.sum(0.5 * jnp.sum(mse_xz, axis=-1))
+
+
+def bone_lengths(pose_BxTxR: jax.Array, bone_pairs: Sequence[tuple[int, int]]) -> jax.Array:
+    """Lengths B x T x len(bone_pairs). Kept-joint index 0 is the root at the origin; joint k >= 1
+    is pose rows 3(k-1) .. 3(k-1)+2."""
+    b, t, r = pose_BxTxR.shape
+    pos = jnp.concatenate([jnp.zeros((b, t, 1, 3), pose_BxTxR.dtype), pose_BxTxR.reshape(b, t, r // 3, 3)], axis=2)
+    pairs = np.asarray(bone_pairs, dtype=np.int32).reshape(-1, 2)
+    diff = pos[:, :, pairs[:, 0]] - pos[:, :, pairs[:, 1]]
+    # sqrt has an infinite gradient at 0; a zero-length generated bone is a degenerate case we
+    # guard so it cannot emit NaN (the reference would).
+    sq = jnp.sum(jnp.square(diff), axis=-1)
+    safe = jnp.where(sq > 0, sq, 1.0)
+    return jnp.where(sq > 0, jnp.sqrt(safe), 0.0)
+
+
+def bone_loss(pose_BxTxR: jax.Array, bone_pairs: Sequence[tuple[int, int]], target_lengths,
+              unit: float = 1.0) -> jax.Array:
+    """MSE (over B x T x bones) between generated and target bone lengths, in `unit`s."""
+    lengths = bone_lengths(pose_BxTxR, bone_pairs)
+    target = jnp.asarray(target_lengths, lengths.dtype)
+    return jnp.mean(jnp.square((lengths - target) / unit))

@@ -1,0 +1,96 @@
+"""Discriminator D (spec §3.5): spectral norm on every layer, built for one window length T.
+
+Input (B x T x 81 x 2, NHWC): channel 0 is the root velocity tiled across the rows (each
+joint's xyz triple sees the root's xyz), channel 1 the pose rows.
+
+    c0_0  SN-conv kt×3 /(2,3)    2 -> top    T/2  × 27
+    c1_0  SN-conv kt×3 /(2,3)  top -> 2top   T/4  × 9    (`features`)
+    c2_0  SN-conv kt×3 /(2,3) 2top -> 4top   T/8  × 3
+    c3_0  SN-conv kt×3 /(2,3) 4top -> 8top   T/16 × 1
+    flatten channel-major (index c·(T/16) + t, PyTorch's order)
+    l_last SN-linear -> 1 (real/fake logit), l_cls SN-linear -> C (style logits)
+
+All convs reflect-pad kt//2 frames in time and nothing in width. Inits: conv N(0, 0.02²) with
+zero bias; linear weight N(0, 0.02²), bias U(±1/sqrt(fan_in)) (PyTorch default).
+
+Fewer than 27 joints: the 3J rows of both channels are zero-padded to 81 so the three-way width
+strides keep the paper's grouping of joints; the parameter count does not depend on J.
+
+Spectral norm: each call with `update_stats=True` runs one power iteration per layer and stores
+u, v (the reference calls D three times per training iteration, in train mode).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+from flax import nnx
+
+from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, uniform_init
+
+PADDED_ROWS = 81
+
+
+class Discriminator(nnx.Module):
+    def __init__(
+        self,
+        num_joints: int = 27,
+        *,
+        num_styles: int,
+        seq_len: int = 128,
+        top: int = 64,
+        kw: int = 5,
+        rngs: nnx.Rngs,
+    ):
+        if not 1 <= num_joints <= PADDED_ROWS // 3:
+            raise ValueError(f"num_joints must be in 1..{PADDED_ROWS // 3}, got {num_joints}")
+        if seq_len % 16:
+            raise ValueError(f"D needs T divisible by 16, got {seq_len}")
+        self.num_joints = num_joints
+        self.seq_len = seq_len
+
+        def sn_conv(cin, cout):
+            return Conv(cin, cout, (kw, 3), (2, 3), spectral_norm=True, rngs=rngs)
+
+        self.c0_0 = sn_conv(2, top)
+        self.c1_0 = sn_conv(top, 2 * top)
+        self.c2_0 = sn_conv(2 * top, 4 * top)
+        self.c3_0 = sn_conv(4 * top, 8 * top)
+        feat = 8 * top * (seq_len // 16)
+        bound = 1.0 / math.sqrt(feat)
+
+        def sn_linear(out):
+            return Dense(feat, out, kernel_init=normal_init(0.02), bias_init=uniform_init(bound),
+                         spectral_norm=True, rngs=rngs)
+
+        self.l_last = sn_linear(1)
+        self.l_cls = sn_linear(num_styles)
+
+    def _input(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
+        b, t, r = pose_BxTxR.shape
+        if t != self.seq_len or r != 3 * self.num_joints or root_vel_BxTx3.shape != (b, t, 3):
+            raise ValueError(
+                f"D built for T={self.seq_len}, {self.num_joints} joints; got root velocity "
+                f"{root_vel_BxTx3.shape} and pose {pose_BxTxR.shape}")
+        x = jnp.stack([jnp.tile(root_vel_BxTx3, (1, 1, self.num_joints)), pose_BxTxR], axis=-1)
+        return jnp.pad(x, ((0, 0), (0, 0), (0, PADDED_ROWS - r), (0, 0)))
+
+    def features(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
+                 update_stats: bool = False) -> jax.Array:
+        """Activations after c1_0 and its LeakyReLU, B x T/4 x 9 x 2top (style search)."""
+        x = self._input(root_vel_BxTx3, pose_BxTxR)
+        x = leaky_relu(self.c0_0(x, update_stats=update_stats))
+        return leaky_relu(self.c1_0(x, update_stats=update_stats))
+
+    def __call__(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
+                 update_stats: bool) -> tuple[jax.Array, jax.Array]:
+        """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business."""
+        x = self.features(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
+        x = leaky_relu(self.c2_0(x, update_stats=update_stats))
+        x = leaky_relu(self.c3_0(x, update_stats=update_stats))  # B x T/16 x 1 x 8top
+        flat = jnp.transpose(x[:, :, 0, :], (0, 2, 1)).reshape(x.shape[0], -1)  # c·T' + t
+        adv_B = self.l_last(flat, update_stats=update_stats)[:, 0]
+        cls_BxC = self.l_cls(flat, update_stats=update_stats)
+        return adv_B, cls_BxC

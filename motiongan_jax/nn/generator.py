@@ -1,0 +1,147 @@
+"""Generator G (spec §3.4): curve velocity + style code w -> root velocity and pose rows.
+
+Layout NHWC = (B, T, W, C). The input velocity B x T x 3 enters as one channel over 3 width
+rows. Every block is conv -> LeakyReLU -> AdaIN(w); the same w feeds all 14 AdaINs. The two
+heads have neither. Skips are taken after AdaIN and tiled along the width, encoder first.
+The reference's unused `dc0_1` is not built.
+
+    ec0_0  conv kt×1           1 -> top        T     × 3
+    ec1_0  conv kt×3 /(2,3)  top -> 2top       T/2   × 1
+    ec1_1  conv kt×1        2top -> 2top       T/2   × 1   e1
+    ec2_0  conv kt×1 /(2,1) 2top -> 4top       T/4   × 1
+    ec2_1  conv kt×1        4top -> 4top       T/4   × 1   e2
+    ec3_0  conv kt×1 /(2,1) 4top -> 8top       T/8   × 1
+    ec3_1  conv kt×1        8top -> 8top       T/8   × 1
+    dc_bottom tconv kt×3    8top -> 8top       T/8   × 3,  up x2 in time
+    dc3_1  tconv kt×3       8top -> 8top       T/4   × 9
+    dc3_0  conv kt×3 (w-reflect 1) -> 4top     T/4   × 9   d2; [e2 tiled, d2], up
+    dc2_1  tconv kt×3       8top -> 4top       T/2   × 27
+    dc2_0  conv kt×3 (w-reflect 1) -> 2top     T/2   × 27  d1; keep J columns; [e1 tiled, d1], up
+    dc1_1  tconv kt×3       4top -> 2top       T     × 3J
+    dc1_0  conv kt×3 (w-reflect 1) -> top      T     × 3J  d0
+    c_traj conv kt×3J        top -> 3          T     × 1   -> root velocity B x T x 3
+    dc0_0  conv kt×1         top -> 1          T     × 3J  -> pose B x T x 3J
+
+Fewer than 27 joints (Bandai has 20). The decoder's width goes 1 -> 3 -> 9 -> 27, one column per
+joint slot at the 27-column stage. For J < 27 joints we keep the first J columns of d1 (after
+dc2_0's AdaIN, before the skip concat), so the per-coordinate stage (dc1_1, dc1_0, both heads)
+works on exactly 3J rows and c_traj's kernel is kt × 3J. Joint k ≥ 1 still owns the column that
+its position in the row layout gives it in the paper's grouping. For J = 27 the crop is the
+identity and the network is the paper's. J > 27 would need another width stage: rejected.
+
+Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
+their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import nnx
+
+from motiongan_jax.nn.latent import LatentTransform
+from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, leaky_relu, upsample_time2
+
+MAX_JOINTS = 27
+
+
+class StyledBlock(nnx.Module):
+    """conv (or tconv) -> LeakyReLU -> AdaIN(w)."""
+
+    def __init__(self, conv: nnx.Module, channels: int, w_dim: int, *, rngs: nnx.Rngs):
+        self.conv = conv
+        self.adain = AdaIN(channels, w_dim, rngs=rngs)
+
+    def __call__(self, x_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
+        return self.adain(leaky_relu(self.conv(x_BxTxWxC)), w_BxW)
+
+
+def _tile_w(x_BxTx1xC: jax.Array, width: int) -> jax.Array:
+    return jnp.broadcast_to(x_BxTx1xC, (x_BxTx1xC.shape[0], x_BxTx1xC.shape[1], width, x_BxTx1xC.shape[3]))
+
+
+class Generator(nnx.Module):
+    # Names of the 14 AdaIN-carrying blocks in forward order.
+    BLOCKS = ("ec0_0", "ec1_0", "ec1_1", "ec2_0", "ec2_1", "ec3_0", "ec3_1",
+              "dc_bottom", "dc3_1", "dc3_0", "dc2_1", "dc2_0", "dc1_1", "dc1_0")
+
+    def __init__(
+        self,
+        num_joints: int = 27,
+        *,
+        top: int = 64,
+        kw: int = 5,
+        w_dim: int = 64,
+        z_dim: int = 64,
+        num_styles: int,
+        rngs: nnx.Rngs,
+    ):
+        if not 1 <= num_joints <= MAX_JOINTS:
+            raise ValueError(f"num_joints must be in 1..{MAX_JOINTS}, got {num_joints}")
+        if kw % 2 != 1:
+            raise ValueError(f"kw must be odd, got {kw}")
+        self.num_joints = num_joints
+        self.num_rows = 3 * num_joints
+        self.w_dim = w_dim
+        self.z_dim = z_dim
+        self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, rngs=rngs)
+
+        def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
+            return StyledBlock(Conv(cin, cout, (kw, kwidth), stride, pad_w=pad_w, rngs=rngs), cout, w_dim, rngs=rngs)
+
+        def tconv(cin, cout):
+            return StyledBlock(ConvTranspose(cin, cout, (kw, 3), rngs=rngs), cout, w_dim, rngs=rngs)
+
+        t1, t2, t4, t8 = top, 2 * top, 4 * top, 8 * top
+        self.ec0_0 = conv(1, t1)
+        self.ec1_0 = conv(t1, t2, 3, (2, 3))
+        self.ec1_1 = conv(t2, t2)
+        self.ec2_0 = conv(t2, t4, 1, (2, 1))
+        self.ec2_1 = conv(t4, t4)
+        self.ec3_0 = conv(t4, t8, 1, (2, 1))
+        self.ec3_1 = conv(t8, t8)
+        self.dc_bottom = tconv(t8, t8)
+        self.dc3_1 = tconv(t8, t8)
+        self.dc3_0 = conv(t8, t4, 3, pad_w=1)
+        self.dc2_1 = tconv(t4 + t4, t4)
+        self.dc2_0 = conv(t4, t2, 3, pad_w=1)
+        self.dc1_1 = tconv(t2 + t2, t2)
+        self.dc1_0 = conv(t2, t1, 3, pad_w=1)
+        self.c_traj = Conv(t1, 3, (kw, self.num_rows), rngs=rngs)
+        self.dc0_0 = Conv(t1, 1, (kw, 1), rngs=rngs)
+
+    def style(self, labels_B: jax.Array, z_BxZ: jax.Array) -> jax.Array:
+        """The style code w (B x w_dim) of the Latent Transform."""
+        return self.latent(labels_B, z_BxZ)
+
+    def adain_styles(self, w_BxW: jax.Array) -> dict[str, tuple[jax.Array, jax.Array]]:
+        """(scale, bias) of every AdaIN layer for a style code, keyed by block name."""
+        return {name: getattr(self, name).adain.style(w_BxW) for name in self.BLOCKS}
+
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array) -> tuple[jax.Array, jax.Array]:
+        b, t, _ = curve_vel_BxTx3.shape
+        if t % 8:
+            raise ValueError(f"G needs T divisible by 8, got T={t}")
+        w = w_BxW
+        x = curve_vel_BxTx3[..., None]  # B x T x 3 x 1
+        x = self.ec0_0(x, w)
+        x = self.ec1_0(x, w)
+        e1 = self.ec1_1(x, w)
+        x = self.ec2_0(e1, w)
+        e2 = self.ec2_1(x, w)
+        x = self.ec3_0(e2, w)
+        x = self.ec3_1(x, w)
+
+        x = upsample_time2(self.dc_bottom(x, w))
+        x = self.dc3_1(x, w)
+        d2 = self.dc3_0(x, w)
+        x = upsample_time2(jnp.concatenate([_tile_w(e2, d2.shape[2]), d2], axis=-1))
+        x = self.dc2_1(x, w)
+        d1 = self.dc2_0(x, w)[:, :, : self.num_joints]
+        x = upsample_time2(jnp.concatenate([_tile_w(e1, d1.shape[2]), d1], axis=-1))
+        x = self.dc1_1(x, w)
+        d0 = self.dc1_0(x, w)
+
+        root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :]
+        pose_BxTxR = self.dc0_0(d0)[..., 0]
+        return root_vel_BxTx3, pose_BxTxR

@@ -1,0 +1,128 @@
+"""The network's motion representation: which joints, in which row order, with which bones.
+
+MotionGAN describes a pose as the root's world position plus every other kept joint's position
+relative to the root (a translation only: the root's orientation is not removed), laid out
+joint-major as x, y, z rows. The rules, applied to any skeleton read from a file:
+
+1. The representation root is the first joint, walking down from the file root, that has more
+   than one child (the pelvis). CMU's file root `Hips` branches at once; Bandai's `joint_Root`
+   has the single child `Hips`, which becomes the root.
+2. Below it, joints whose OFFSET has squared length <= 1e-8 are dropped (they coincide with their
+   parent). What remains, in depth-first file order, are the kept joints. For CMU that is the
+   paper's 28 joints (81 rows); for Bandai, Hips plus 20 joints (60 rows).
+3. A kept joint's bone runs to its nearest kept ancestor. Since only zero-length joints are
+   skipped, the bone's length is the norm of the joint's own OFFSET.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from motiongan_jax.bvh import Skeleton
+
+# Metres per file unit, by source. CMU's unit is the paper's: 1 unit = 0.056444 m.
+UNITS_TO_M = {"cmu": 0.056444, "paper": 0.056444, "synthetic": 0.056444, "bandai": 0.01}
+
+_ZERO_LENGTH_SQ = 1e-8
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class RowLayout:
+    joint_names: tuple[str, ...]  # kept joints, index 0 = root
+    parents: tuple[int, ...]  # nearest kept ancestor, -1 for the root
+    source_index: tuple[int, ...]  # kept joint -> index in the skeleton (End Sites included)
+    bone_pairs: tuple[tuple[int, int], ...]  # (parent, child) in kept indices, one per non-root joint
+    bone_lengths_m: np.ndarray  # (J - 1,) metres, in the order of bone_pairs
+
+    @property
+    def num_joints(self) -> int:
+        """Kept joints including the root."""
+        return len(self.joint_names)
+
+    @property
+    def num_rel_joints(self) -> int:
+        return len(self.joint_names) - 1
+
+    @property
+    def num_rows(self) -> int:
+        return 3 * (len(self.joint_names) - 1)
+
+    def signature(self) -> tuple:
+        """What must match between a dataset and a checkpoint (lengths may differ slightly)."""
+        return (self.joint_names, self.parents)
+
+
+def representation_root(skeleton: Skeleton) -> int:
+    children: dict[int, list[int]] = {j: [] for j in range(skeleton.num_joints)}
+    for j, p in enumerate(skeleton.parents):
+        if p >= 0:
+            children[p].append(j)
+    j = 0
+    while len(children[j]) == 1:
+        j = children[j][0]
+    if not children[j]:
+        raise ValueError(f"skeleton has no branching joint below {skeleton.names[0]!r}: cannot pick a root")
+    return j
+
+
+def layout_from_skeleton(skeleton: Skeleton, units_to_m: float) -> RowLayout:
+    root = representation_root(skeleton)
+    below_root = {root}
+    kept = [root]
+    kept_parent = {root: -1}
+    nearest_kept = {root: root}
+    for j in range(root + 1, skeleton.num_joints):
+        p = skeleton.parents[j]
+        if p not in below_root:
+            continue
+        below_root.add(j)
+        if float(np.sum(np.square(skeleton.offsets[j]))) <= _ZERO_LENGTH_SQ:
+            nearest_kept[j] = nearest_kept[p]
+            continue
+        kept_parent[j] = nearest_kept[p]
+        nearest_kept[j] = j
+        kept.append(j)
+    position = {src: k for k, src in enumerate(kept)}
+    parents = tuple(-1 if kept_parent[src] < 0 else position[kept_parent[src]] for src in kept)
+    pairs = tuple((parents[k], k) for k in range(1, len(kept)))
+    lengths = np.array([np.linalg.norm(skeleton.offsets[kept[k]]) * units_to_m for k in range(1, len(kept))])
+    return RowLayout(
+        joint_names=tuple(skeleton.names[s] for s in kept),
+        parents=parents,
+        source_index=tuple(kept),
+        bone_pairs=pairs,
+        bone_lengths_m=lengths,
+    )
+
+
+def to_rows(world_m_FxJx3: np.ndarray, layout: RowLayout) -> tuple[np.ndarray, np.ndarray]:
+    """World positions of every skeleton joint -> (root_Fx3, pose_FxR)."""
+    kept_FxKx3 = world_m_FxJx3[:, list(layout.source_index)]
+    root_Fx3 = kept_FxKx3[:, 0]
+    rel_FxKx3 = kept_FxKx3[:, 1:] - root_Fx3[:, None]
+    return root_Fx3, rel_FxKx3.reshape(len(root_Fx3), -1)
+
+
+def from_rows(root_Fx3, pose_FxR, layout: RowLayout):
+    """(root, rows) -> world positions of the kept joints, (F, J, 3). Works for numpy and jnp."""
+    rel = pose_FxR.reshape(pose_FxR.shape[:-1] + (layout.num_rel_joints, 3))
+    return _concat(root_Fx3[..., None, :], rel + root_Fx3[..., None, :])
+
+
+def _concat(a, b):
+    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
+        return np.concatenate([a, b], axis=-2)
+    import jax.numpy as jnp
+
+    return jnp.concatenate([a, b], axis=-2)
+
+
+def bone_lengths(pose_xR, layout: RowLayout) -> np.ndarray:
+    """Bone lengths of root-relative rows (root at the origin), shape (..., J - 1). numpy."""
+    rel = pose_xR.reshape(pose_xR.shape[:-1] + (layout.num_rel_joints, 3))
+    full = np.concatenate([np.zeros_like(rel[..., :1, :]), rel], axis=-2)
+    a = np.array([p for p, _ in layout.bone_pairs])
+    b = np.array([c for _, c in layout.bone_pairs])
+    return np.linalg.norm(full[..., b, :] - full[..., a, :], axis=-1)

@@ -1,0 +1,272 @@
+"""One training iteration, D then G (spec §4.2), in NNX's functional form.
+
+The modules are split once into graph definitions (static) and state (arrays); `train_step` is a
+pure function that merges them inside, so the caller can `jax.jit(..., donate_argnums=0)` it.
+
+    key -> fake labels ŷ ~ U{0..C-1} (independent of the batch), z ~ N(0, I) (or zeros)
+    one G forward on velocity(curve): (v̂, P̂), kept with its VJP
+    D update:  L_D = w_adv [BCE(D(v̂, P̂)ᵃ, 0.1) + BCE(D(u, P)ᵃ, 0.9)] + w_cls BCE(D(u, P)ᶜ, y)
+               on the detached fake; Adam step for D
+    G update through the *updated* D, G not re-run:
+               L_G = w_adv BCE(D(v̂, P̂)ᵃ, 0.9) + w_cls BCE(D(v̂, P̂)ᶜ, ŷ) + w_curve curve + w_bone bone
+               dL/d(v̂, P̂) pulled back through the stored VJP of the single G forward; Adam step for G
+
+D runs three times (fake for D, real for D, fake for G, in that order) with `update_stats=True`,
+so its spectral-norm vectors advance three power iterations per step, as in the reference.
+No PRNG key lives in the state: the caller passes `fold_in(base_key, step)`.
+
+`layout` is anything with `num_rows`, `bone_pairs` and `bone_lengths_m` (representation.RowLayout).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax import nnx, struct
+
+from motiongan_jax import curves, losses
+from motiongan_jax.nn import Discriminator, Generator, SpectralNormState
+
+
+@struct.dataclass
+class TrainState:
+    g_params: Any  # nnx.State of G's nnx.Param (Latent Transform included)
+    d_params: Any  # nnx.State of D's nnx.Param (raw, un-normalised weights)
+    d_sn_state: Any  # nnx.State of D's SpectralNormState (power-iteration u, v)
+    opt_g_state: Any
+    opt_d_state: Any
+    step: jax.Array  # int32 scalar: completed iterations
+    g_def: nnx.GraphDef = struct.field(pytree_node=False)
+    d_def: nnx.GraphDef = struct.field(pytree_node=False)
+
+
+def _num_joints(layout) -> int:
+    rows = int(layout.num_rows)
+    if rows % 3:
+        raise ValueError(f"layout.num_rows must be a multiple of 3, got {rows}")
+    return rows // 3
+
+
+def _build(cfg, num_joints: int, num_styles: int, key) -> tuple[Generator, Discriminator]:
+    m = cfg.model
+    k_g, k_d = jax.random.split(key)
+    g = Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
+                  num_styles=num_styles, rngs=nnx.Rngs(k_g))
+    d = Discriminator(num_joints, num_styles=num_styles, seq_len=cfg.data.window_T, top=m.top,
+                      kw=m.kw, rngs=nnx.Rngs(k_d))
+    return g, d
+
+
+def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransformation]:
+    """(Adam for G, Adam for D), β = (beta1, beta2), eps 1e-8, no decay or schedule (spec §4.1)."""
+    t = cfg.train
+    return (optax.adam(t.lr_g, b1=t.beta1, b2=t.beta2, eps=1e-8),
+            optax.adam(t.lr_d, b1=t.beta1, b2=t.beta2, eps=1e-8))
+
+
+def init_state(cfg, layout, num_styles: int, key: jax.Array) -> TrainState:
+    """Fresh G, D, spectral-norm vectors and both Adam states; step 0."""
+    num_joints = _num_joints(layout)
+    abstract_g, abstract_d = nnx.eval_shape(lambda: _build(cfg, num_joints, num_styles, jax.random.key(0)))
+    g_def = nnx.split(abstract_g, nnx.Param)[0]
+    d_def = nnx.split(abstract_d, nnx.Param, SpectralNormState)[0]
+    tx_g, tx_d = optimizers(cfg)
+
+    @jax.jit
+    def arrays(key):
+        g, d = _build(cfg, num_joints, num_styles, key)
+        _, g_params = nnx.split(g, nnx.Param)
+        _, d_params, d_sn = nnx.split(d, nnx.Param, SpectralNormState)
+        return g_params, d_params, d_sn, tx_g.init(g_params), tx_d.init(d_params)
+
+    g_params, d_params, d_sn, opt_g, opt_d = arrays(key)
+    return TrainState(g_params=g_params, d_params=d_params, d_sn_state=d_sn, opt_g_state=opt_g,
+                      opt_d_state=opt_d, step=jnp.zeros((), jnp.int32), g_def=g_def, d_def=d_def)
+
+
+# ---------------------------------------------------------------------------------------------
+# Running G with given parameters (previews, generation, analysis)
+
+
+def generator(state: TrainState, g_params=None) -> Generator:
+    """G as an NNX module (a fresh copy; mutating it does not touch the state)."""
+    return nnx.merge(state.g_def, state.g_params if g_params is None else g_params, copy=True)
+
+
+def discriminator(state: TrainState) -> Discriminator:
+    return nnx.merge(state.d_def, state.d_params, state.d_sn_state, copy=True)
+
+
+def _zeros_z(state: TrainState, batch: int) -> jax.Array:
+    return jnp.zeros((batch, generator_z_dim(state)), jnp.float32)
+
+
+def generator_z_dim(state: TrainState) -> int:
+    return int(state.g_params["latent"]["embed"].shape[-1])
+
+
+def latent_w(state: TrainState, labels_B: jax.Array, z_BxZ: jax.Array | None = None) -> jax.Array:
+    """Style code w (B x w_dim); z defaults to zeros, as the reference's inference tools use."""
+    labels_B = jnp.asarray(labels_B, jnp.int32)
+    z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
+    return generator(state).style(labels_B, z)
+
+
+def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax.Array | None = None,
+                    z_BxZ: jax.Array | None = None, *, w_BxW: jax.Array | None = None):
+    """(root_vel_BxTx3, pose_BxTxR) from G with the state's parameters.
+
+    Give either labels (and optionally z, default zeros) or a style code `w_BxW` directly. To run
+    other parameters, pass `state.replace(g_params=...)`.
+    """
+    g = generator(state)
+    if w_BxW is None:
+        if labels_B is None:
+            raise ValueError("generator_apply needs labels_B or w_BxW")
+        labels_B = jnp.asarray(labels_B, jnp.int32)
+        z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
+        w_BxW = g.style(labels_B, z)
+    return g(curve_vel_BxTx3, w_BxW)
+
+
+def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:
+    """`generate(state, curve_vel_BxTx3, labels_B, z_BxZ=None) -> (root_vel, pose)`, jit-able.
+    The arguments are accepted for symmetry with make_train_step; the state carries the model."""
+    del cfg, layout, num_styles
+
+    def generate(state, curve_vel_BxTx3, labels_B, z_BxZ=None):
+        return generator_apply(state, curve_vel_BxTx3, labels_B, z_BxZ)
+
+    return generate
+
+
+# ---------------------------------------------------------------------------------------------
+# Losses as functions of a merged D
+
+
+def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR,
+             labels_B, train_cfg) -> dict[str, jax.Array]:
+    """D's loss terms; the fake is detached here, so no gradient can reach G through them.
+    Calls D twice (fake, then real), advancing its spectral-norm vectors each time."""
+    mode = train_cfg.gan_loss
+    adv_f, _ = d(jax.lax.stop_gradient(fake_vel_BxTx3), jax.lax.stop_gradient(fake_pose_BxTxR),
+                 update_stats=True)
+    adv_r, cls_r = d(real_vel_BxTx3, real_pose_BxTxR, update_stats=True)
+    adv_fake = losses.adversarial_loss(adv_f, losses.FAKE_TARGET, mode)
+    adv_real = losses.adversarial_loss(adv_r, losses.REAL_TARGET, mode)
+    cls = losses.class_loss(cls_r, labels_B, mode)
+    d_adv = adv_fake + adv_real
+    return {
+        "d_adv_fake": adv_fake,
+        "d_adv_real": adv_real,
+        "d_adv": d_adv,
+        "d_cls": cls,
+        "d_total": train_cfg.w_d_adv * d_adv + train_cfg.w_d_cls * cls,
+        "d_acc_real": jnp.mean((adv_r > 0).astype(jnp.float32)),  # sigmoid > 0.5
+        "d_acc_fake": jnp.mean((adv_f < 0).astype(jnp.float32)),
+        "d_cls_acc_real": jnp.mean((jnp.argmax(cls_r, -1) == labels_B).astype(jnp.float32)),
+    }
+
+
+def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, curve_BxTx3,
+             bone_pairs, bone_lengths_m, train_cfg) -> dict[str, jax.Array]:
+    """G's loss terms (one D call). Curve and bone losses are in units of loss_length_unit."""
+    t = train_cfg
+    adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True)
+    adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
+    cls = losses.class_loss(cls_f, fake_labels_B, t.gan_loss)
+    curve = losses.curve_loss(fake_vel_BxTx3, curve_BxTx3, t.curve_points, t.loss_length_unit)
+    bone = losses.bone_loss(fake_pose_BxTxR, bone_pairs, bone_lengths_m, t.loss_length_unit)
+    return {
+        "g_adv": adv,
+        "g_cls": cls,
+        "g_curve": curve,
+        "g_bone": bone,
+        "g_total": t.w_g_adv * adv + t.w_g_cls * cls + t.w_g_curve * curve + t.w_g_bone * bone,
+        "g_cls_acc_fake": jnp.mean((jnp.argmax(cls_f, -1) == fake_labels_B).astype(jnp.float32)),
+    }
+
+
+def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Array, jax.Array]:
+    """Fake labels ŷ ~ U{0..C-1} and z (N(0, I), or zeros when model.use_z == 'zeros')."""
+    k_label, k_z = jax.random.split(key)
+    labels = jax.random.randint(k_label, (batch,), 0, num_styles, dtype=jnp.int32)
+    if cfg.model.use_z == "zeros":
+        z = jnp.zeros((batch, cfg.model.z_dim), jnp.float32)
+    else:
+        z = jax.random.normal(k_z, (batch, cfg.model.z_dim), jnp.float32)
+    return labels, z
+
+
+# ---------------------------------------------------------------------------------------------
+# The step
+
+
+def make_train_step(cfg, layout, num_styles: int) -> Callable:
+    """`train_step(state, batch, key) -> (state, metrics)`, pure; jit it with donate_argnums=0.
+
+    batch: root_BxTx3, pose_BxTxR, curve_BxTx3 (metres), label_B (int32); see CONTRACTS.md.
+    metrics: scalar loss terms (unweighted; *_total are weighted), D accuracies, and the global L2
+    norms of grads, params (after the update) and updates of each network.
+    """
+    tcfg = cfg.train
+    if tcfg.gan_loss not in losses.GAN_LOSSES:
+        raise ValueError(f"train.gan_loss must be one of {losses.GAN_LOSSES}, got {tcfg.gan_loss!r}")
+    _num_joints(layout)
+    bone_pairs = tuple((int(a), int(b)) for a, b in layout.bone_pairs)
+    bone_lengths = np.asarray(layout.bone_lengths_m, np.float32)
+    if bone_lengths.shape != (len(bone_pairs),):
+        raise ValueError(f"{len(bone_pairs)} bone pairs but bone_lengths_m has shape {bone_lengths.shape}")
+    tx_g, tx_d = optimizers(cfg)
+
+    def train_step(state: TrainState, batch: dict, key: jax.Array) -> tuple[TrainState, dict]:
+        curve = batch["curve_BxTx3"]
+        fake_labels, z = sample_labels_and_z(cfg, num_styles, curve.shape[0], key)
+        curve_vel = curves.velocity(curve)
+        real_vel = curves.velocity(batch["root_BxTx3"])
+        real_pose = batch["pose_BxTxR"]
+
+        # The single G forward; its VJP carries G's loss gradient back after the D update.
+        def g_forward(g_params):
+            g = nnx.merge(state.g_def, g_params, copy=True)
+            return g(curve_vel, g.style(fake_labels, z))
+
+        fake, g_vjp = jax.vjp(g_forward, state.g_params)
+
+        # --- D update on the detached fake and the real batch --------------------------------
+        def d_objective(d_params):
+            d = nnx.merge(state.d_def, d_params, state.d_sn_state, copy=True)
+            terms = d_losses(d, *fake, real_vel, real_pose, batch["label_B"], tcfg)
+            return terms["d_total"], (terms, nnx.state(d, SpectralNormState))
+
+        (_, (d_terms, sn)), d_grads = jax.value_and_grad(d_objective, has_aux=True)(state.d_params)
+        d_updates, opt_d = tx_d.update(d_grads, state.opt_d_state, state.d_params)
+        d_params = optax.apply_updates(state.d_params, d_updates)
+
+        # --- G update through the updated D --------------------------------------------------
+        def g_objective(fake_out):
+            d = nnx.merge(state.d_def, d_params, sn, copy=True)
+            terms = g_losses(d, *fake_out, fake_labels, curve, bone_pairs, bone_lengths, tcfg)
+            return terms["g_total"], (terms, nnx.state(d, SpectralNormState))
+
+        (_, (g_terms, sn)), fake_grads = jax.value_and_grad(g_objective, has_aux=True)(fake)
+        (g_grads,) = g_vjp(fake_grads)
+        g_updates, opt_g = tx_g.update(g_grads, state.opt_g_state, state.g_params)
+        g_params = optax.apply_updates(state.g_params, g_updates)
+
+        metrics = {**d_terms, **g_terms,
+                   "g_grad_norm": optax.global_norm(g_grads),
+                   "g_param_norm": optax.global_norm(g_params),
+                   "g_update_norm": optax.global_norm(g_updates),
+                   "d_grad_norm": optax.global_norm(d_grads),
+                   "d_param_norm": optax.global_norm(d_params),
+                   "d_update_norm": optax.global_norm(d_updates)}
+        new_state = state.replace(g_params=g_params, d_params=d_params, d_sn_state=sn,
+                                  opt_g_state=opt_g, opt_d_state=opt_d, step=state.step + 1)
+        return new_state, metrics
+
+    return train_step

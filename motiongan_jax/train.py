@@ -1,0 +1,197 @@
+"""The training loop: data, the jitted step, logging, previews, checkpoints and resume.
+
+Every random choice is a pure function of the seed and the step: the batch of step s comes from
+fold_in(data_key, s) and the step's own key is fold_in(step_key, s). A run killed and resumed
+from its latest checkpoint therefore repeats exactly what an unbroken run does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motiongan_jax import checkpoint, curves, data, step as step_lib
+from motiongan_jax.config import Config, config_hash, to_dict
+from motiongan_jax.representation import from_rows
+
+
+class NonFiniteError(FloatingPointError):
+    """A loss or gradient became NaN or infinite."""
+
+
+# ----------------------------------------------------------------------------------------------
+# set-up
+# ----------------------------------------------------------------------------------------------
+
+def run_meta(cfg: Config, dataset: data.Dataset) -> dict:
+    """What a checkpoint must carry to be used without the data (and checked on resume)."""
+    return {
+        "config": to_dict(cfg),
+        "config_hash": config_hash(cfg),
+        "style_names": list(dataset.style_names),
+        "joint_names": list(dataset.layout.joint_names),
+        "parents": list(dataset.layout.parents),
+        "bone_lengths_m": [float(x) for x in dataset.layout.bone_lengths_m],
+        "fps": dataset.fps,
+        "model": to_dict(cfg)["model"],
+        "window_T": cfg.data.window_T,
+        "data_dir": dataset.data_dir,
+    }
+
+
+def keys(seed: int):
+    base = jax.random.key(seed)
+    k_init, k_data, k_step = jax.random.split(base, 3)
+    return k_init, k_data, k_step
+
+
+def _append_jsonl(path: Path, record: dict) -> None:
+    with open(path, "a") as fh:
+        fh.write(json.dumps(record) + "\n")
+
+
+def _truncate_metrics(path: Path, last_step: int) -> None:
+    """After a resume, drop records logged past the checkpoint (they will be logged again)."""
+    if not path.exists():
+        return
+    keep = [line for line in path.read_text().splitlines() if line.strip() and json.loads(line)["step"] <= last_step]
+    data.atomic_write_text(path, "".join(line + "\n" for line in keep))
+
+
+class Progress:
+    """A one-line progress bar on stderr: step, steps/s, ETA and the main losses."""
+
+    def __init__(self, total: int, start: int, enabled: bool):
+        self.total, self.start, self.enabled = total, start, enabled
+        self.t0 = time.perf_counter()
+
+    def update(self, step: int, metrics: dict) -> str:
+        done = step - self.start
+        rate = done / max(time.perf_counter() - self.t0, 1e-9)
+        eta = (self.total - step) / rate if rate > 0 else float("inf")
+        width = 24
+        filled = int(width * step / self.total)
+        losses = " ".join(f"{k}={metrics[k]:.3g}" for k in ("d_total", "g_adv", "g_cls", "g_curve", "g_bone") if k in metrics)
+        line = (f"[{'#' * filled}{'.' * (width - filled)}] {step}/{self.total} {rate:.2f} it/s "
+                f"ETA {_hms(eta)} {losses}")
+        if self.enabled:
+            print(line, file=sys.stderr, flush=True)
+        return line
+
+
+def _hms(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "?"
+    s = int(seconds)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
+# ----------------------------------------------------------------------------------------------
+# preview
+# ----------------------------------------------------------------------------------------------
+
+def preview_curve(T: int, spacing_m: float) -> np.ndarray:
+    """The fixed preview curve: an S-curve with the training data's mean spacing per sample."""
+    pts = curves.shape_curve("s_curve", length=spacing_m * (T - 1) * 1.5, num_points=200)
+    xz = curves.resample_polyline(pts, num_points=T)
+    return np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], -1).astype(np.float32)
+
+
+def write_preview(path: Path, state, generate_fn, meta: dict, curve_Tx3: np.ndarray, num: int = 3) -> Path:
+    from motiongan_jax import viz
+    from motiongan_jax.representation import RowLayout
+
+    styles = meta["style_names"]
+    labels = np.linspace(0, len(styles) - 1, min(num, len(styles))).round().astype(np.int32)
+    vel = curves.velocity(jnp.asarray(curve_Tx3)[None].repeat(len(labels), 0))
+    root_vel, pose = generate_fn(state, vel, jnp.asarray(labels))
+    start = jnp.asarray(curve_Tx3[0]).at[1].set(0.0)
+    start = jnp.broadcast_to(start, (len(labels), 3))
+    root = curves.integrate(start, root_vel)
+    # the generator predicts no absolute height: lift the root to the data's bone-derived hip height
+    layout = RowLayout(tuple(meta["joint_names"]), tuple(meta["parents"]), (), (), np.asarray(meta["bone_lengths_m"]))
+    joints = np.asarray(from_rows(root, pose, layout))
+    joints[..., 1] -= joints[..., 1].min(axis=(1, 2), keepdims=True)
+    return viz.animate_skeletons(list(joints), meta["parents"], [styles[i] for i in labels], path,
+                                 curves=[curve_Tx3] * len(labels))
+
+
+# ----------------------------------------------------------------------------------------------
+# the loop
+# ----------------------------------------------------------------------------------------------
+
+def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print) -> dict:
+    """Train (or resume) in `workdir`; returns the last logged metrics."""
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    dataset = data.load_dataset(cfg.data, log=log)
+    data.write_file_lists(workdir, [(c.source, c.label) for c in dataset.train], [(c.source, c.label) for c in dataset.val])
+    meta = run_meta(cfg, dataset)
+    data.atomic_write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
+
+    arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
+    sample_batch = jax.jit(data.make_sample_batch(cfg.data, cfg.train.batch_size))
+    k_init, k_data, k_step = keys(cfg.train.seed)
+    state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
+    train_step = jax.jit(step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles), donate_argnums=0)
+    generate_fn = jax.jit(step_lib.make_generate(cfg, dataset.layout, dataset.num_styles))
+
+    mngr = checkpoint.manager(workdir / "checkpoints", keep=cfg.train.keep_checkpoints)
+    start = 0
+    if mngr.latest_step() is not None:
+        ck_step, ck_meta = checkpoint.read_meta(mngr)
+        checkpoint.check_compatible(ck_meta, meta, str(workdir / "checkpoints"))
+        state = checkpoint.restore(mngr, ck_step, state)
+        start = ck_step
+        log(f"resumed from checkpoint at step {start} in {workdir / 'checkpoints'}")
+    _truncate_metrics(workdir / "metrics.jsonl", start)
+    total = cfg.train.num_steps
+    if start >= total:
+        log(f"nothing to do: checkpoint step {start} >= train.num_steps {total}")
+        return {}
+
+    spacing = float(jnp.mean(jnp.linalg.norm(jnp.diff(arrays.root_Nx3[:, jnp.array([0, 2])], axis=0), axis=-1))) * cfg.data.frame_step
+    preview = preview_curve(cfg.data.window_T, spacing)
+    bar = Progress(total, start, progress)
+    last: dict = {}
+    pending = None  # (step, metrics) of the previous step, checked one step late to keep dispatch async
+    for s in range(start, total):
+        batch = sample_batch(arrays, k_data, s)
+        state, metrics = train_step(state, batch, jax.random.fold_in(k_step, s))
+        if pending is not None:
+            last = _check_and_log(pending, workdir, cfg, bar)
+        pending = (s + 1, metrics)
+        done = s + 1
+        if done % cfg.train.checkpoint_every == 0 or done == total:
+            last = _check_and_log(pending, workdir, cfg, bar, force=done == total)
+            pending = None
+            checkpoint.save(mngr, done, state, meta)
+        if cfg.train.preview_every and done % cfg.train.preview_every == 0:
+            write_preview(workdir / "previews" / f"step_{done:07d}.gif", state, generate_fn, meta, preview)
+    if pending is not None:
+        last = _check_and_log(pending, workdir, cfg, bar, force=True)
+    return last
+
+
+def _check_and_log(pending, workdir: Path, cfg: Config, bar: Progress, force: bool = False) -> dict:
+    step, metrics = pending
+    values = {k: float(v) for k, v in jax.device_get(metrics).items()}
+    bad = [k for k, v in values.items() if not math.isfinite(v)]
+    if bad:
+        raise NonFiniteError(
+            f"non-finite values at step {step}: {', '.join(bad)}; training stopped, "
+            f"the latest checkpoint in {workdir / 'checkpoints'} is the last good one")
+    if force or step % cfg.train.log_every == 0:
+        record = {"step": step, **values}
+        _append_jsonl(workdir / "metrics.jsonl", record)
+        bar.update(step, values)
+    return values

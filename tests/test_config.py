@@ -1,0 +1,60 @@
+from pathlib import Path
+
+import pytest
+
+from motiongan_jax.config import ConfigError, config_hash, load_config, override, validate
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+@pytest.mark.parametrize("name", ["cpu", "tiny"])
+def test_embedded_data_configs_load(name):
+    assert load_config(CONFIGS / f"{name}.py").name == name
+
+
+@pytest.mark.parametrize("name", ["paper", "bandai"])
+def test_real_data_configs_need_a_data_dir(name):
+    with pytest.raises(ConfigError, match=r"data\.data_dir"):
+        load_config(CONFIGS / f"{name}.py")
+
+
+def test_paper_config_is_the_papers(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("paper_cfg", CONFIGS / "paper.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cfg = override(mod.get_config(), [f"data.data_dir={tmp_path}"])
+    validate(cfg)
+    assert (cfg.train.batch_size, cfg.data.window_T, cfg.train.num_steps) == (24, 128, 200_000)
+    assert len(cfg.data.styles) == 28 and cfg.data.styles[0] == "Cat" and cfg.data.styles[-1] == "Sneaky"
+    assert (cfg.train.lr_d, cfg.train.lr_g, cfg.train.beta1, cfg.train.beta2) == (1e-4, 2e-4, 0.5, 0.999)
+
+
+def test_override_types_and_errors():
+    cfg = load_config(CONFIGS / "tiny.py")
+    cfg2 = override(cfg, ["train.batch_size=8", "train.lr_g=0.001", "data.rotate=False",
+                          "data.fps_factors=(1.0,)", "name=x"])
+    assert cfg2.train.batch_size == 8 and cfg2.train.lr_g == 0.001 and cfg2.data.rotate is False
+    assert cfg2.data.fps_factors == (1.0,) and cfg2.name == "x"
+    assert config_hash(cfg) != config_hash(cfg2)
+    assert config_hash(cfg) == config_hash(load_config(CONFIGS / "tiny.py"))
+    with pytest.raises(ConfigError, match="train.nope"):
+        override(cfg, ["train.nope=1"])
+    with pytest.raises(ConfigError, match="train.batch_size"):
+        override(cfg, ["train.batch_size=abc"])
+    with pytest.raises(ConfigError, match="not of the form"):
+        override(cfg, ["train.batch_size"])
+
+
+@pytest.mark.parametrize("assignment, field", [
+    ("data.frame_nums=60", "data.frame_nums"),  # T = 15, not a multiple of 8
+    ("data.label_rule=bogus", "data.label_rule"),
+    ("data.data_dir=/no/such/dir", "data.data_dir"),
+    ("model.kw=4", "model.kw"),
+    ("train.curve_points=3", "train.curve_points"),
+])
+def test_invalid_values_name_the_field(assignment, field):
+    cfg = load_config(CONFIGS / "tiny.py")
+    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
+        validate(override(cfg, [assignment]))

@@ -1,0 +1,85 @@
+import numpy as np
+import pytest
+
+from motiongan_jax import bvh, kinematics
+from motiongan_jax.representation import (bone_lengths, from_rows, layout_from_skeleton,
+                                          representation_root, to_rows)
+
+CMU_UNIT = 0.056444
+
+# Spec §2.3: the paper's 28 kept joints, in order.
+PAPER_JOINTS = (
+    "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite",
+    "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite",
+    "Spine", "Spine1", "Neck1", "Head", "Head_EndSite",
+    "LeftArm", "LeftForeArm", "LeftHand", "LeftHandIndex1", "LeftHandIndex1_EndSite", "LThumb_EndSite",
+    "RightArm", "RightForeArm", "RightHand", "RightHandIndex1", "RightHandIndex1_EndSite", "RThumb_EndSite",
+)
+# Spec §2.3: the 27 bone pairs of the bone loss.
+PAPER_BONES = {
+    (0, 11), (11, 12), (12, 22), (22, 23), (23, 24), (24, 27), (24, 25), (25, 26),
+    (12, 16), (16, 17), (17, 18), (18, 21), (18, 19), (19, 20),
+    (12, 13), (13, 14), (14, 15),
+    (0, 6), (6, 7), (7, 8), (8, 9), (9, 10),
+    (0, 1), (1, 2), (2, 3), (3, 4), (4, 5),
+}
+
+
+@pytest.fixture(scope="module")
+def cmu(shared_data):
+    return bvh.read_bvh(shared_data / "cmu" / "CMU_standard.bvh")
+
+
+@pytest.fixture(scope="module")
+def bandai(shared_data):
+    return bvh.read_bvh(shared_data / "bandai" / "dataset-2" / "dataset-2_walk_normal_001.bvh")
+
+
+def test_cmu_layout_is_the_papers(cmu):
+    layout = layout_from_skeleton(cmu.skeleton, CMU_UNIT)
+    assert layout.joint_names == PAPER_JOINTS
+    assert layout.num_rows == 81
+    assert set(layout.bone_pairs) == PAPER_BONES
+    assert len(layout.bone_pairs) == 27
+
+
+def test_bandai_layout_roots_at_hips(bandai):
+    sk = bandai.skeleton
+    assert sk.names[representation_root(sk)] == "Hips"
+    layout = layout_from_skeleton(sk, 0.01)
+    assert layout.joint_names[0] == "Hips"
+    assert layout.num_rel_joints == 20
+    assert layout.num_rows == 60
+    assert "joint_Root" not in layout.joint_names
+    assert not any(n.endswith("_EndSite") for n in layout.joint_names)  # zero-length End Sites
+
+
+def test_rows_roundtrip_and_bone_lengths_from_fk(cmu, bandai):
+    for motion, unit in ((cmu, CMU_UNIT), (bandai, 0.01)):
+        layout = layout_from_skeleton(motion.skeleton, unit)
+        world = kinematics.world_positions(motion) * unit
+        root, pose = to_rows(world, layout)
+        assert root.shape == (motion.num_frames, 3)
+        assert pose.shape == (motion.num_frames, layout.num_rows)
+        back = from_rows(root, pose, layout)
+        np.testing.assert_allclose(back, world[:, list(layout.source_index)], atol=1e-9)
+        # Rigid bones: FK rows have the skeleton's bone lengths in every frame.
+        lengths = bone_lengths(pose, layout)
+        np.testing.assert_allclose(lengths, np.broadcast_to(layout.bone_lengths_m, lengths.shape), atol=1e-6)
+
+
+def test_hand_built_skeleton():
+    # root -> a (zero length) -> b ; root -> c ; b -> End Site
+    sk = bvh.Skeleton(
+        names=("R", "a", "b", "b_EndSite", "c"),
+        parents=(-1, 0, 1, 2, 0),
+        offsets=np.array([[0, 0, 0], [0, 0, 0], [0, 2.0, 0], [0, 0, 3.0], [4.0, 0, 0]]),
+        channels=(("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation"),
+                  ("Zrotation", "Yrotation", "Xrotation"), ("Zrotation", "Yrotation", "Xrotation"), (),
+                  ("Zrotation", "Yrotation", "Xrotation")),
+    )
+    layout = layout_from_skeleton(sk, 0.5)
+    assert layout.joint_names == ("R", "b", "b_EndSite", "c")
+    assert layout.parents == (-1, 0, 1, 0)
+    assert layout.bone_pairs == ((0, 1), (1, 2), (0, 3))
+    np.testing.assert_allclose(layout.bone_lengths_m, [1.0, 1.5, 2.0])
