@@ -60,3 +60,21 @@ def check_compatible(meta: dict, expected: dict, where: str) -> None:
 
 def _jsonable(x):
     return json.loads(json.dumps(x, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))
+
+
+def load_run(workdir: str | Path, step: int | None = None):
+    """(state, meta, cfg, layout) of a training run's checkpoint, without its data."""
+    from motiongan_jax import step as step_lib
+    from motiongan_jax.config import from_dict
+    from motiongan_jax.representation import layout_from_parents
+
+    ckdir = Path(workdir) / "checkpoints"
+    if not ckdir.is_dir():
+        raise CheckpointError(f"no checkpoints in {workdir} (expected {ckdir})")
+    mngr = manager(ckdir)
+    step, meta = read_meta(mngr, step)
+    cfg = from_dict(meta["config"])
+    layout = layout_from_parents(meta["joint_names"], meta["parents"], meta["bone_lengths_m"])
+    like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
+    state = restore(mngr, step, like)
+    return state, meta, cfg, layout

@@ -216,6 +216,19 @@ def validate(cfg: Config) -> Config:
     return cfg
 
 
+def from_dict(d: dict) -> Config:
+    """Inverse of to_dict (lists become tuples again); unknown keys are errors."""
+    def section(cls, values):
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(values) - names
+        if unknown:
+            raise ConfigError(f"unknown {cls.__name__} field(s): {', '.join(sorted(unknown))}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+
+    return Config(name=d.get("name", "restored"), data=section(DataConfig, d.get("data", {})),
+                  model=section(ModelConfig, d.get("model", {})), train=section(TrainConfig, d.get("train", {})))
+
+
 def to_dict(cfg: Config) -> dict:
     return dataclasses.asdict(cfg)
 

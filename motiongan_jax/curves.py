@@ -21,6 +21,7 @@ Spline (spec §2.6, with the reference's bugs fixed):
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import pathlib
@@ -35,6 +36,9 @@ import numpy as np
 # while the table stays small (4 * 1535 entries for a 1536-frame window). The reference used
 # 1 sub-step in training and 10 for its cache.
 SUBSTEPS = 4
+# The same for smoothed user curves, per input point: drawn points can be ~1 m apart on a tight
+# turn, so use more (3000 points -> a 96k-entry table, still instant).
+SMOOTH_SUBSTEPS = 32
 
 SHAPES = ("line", "circle", "s_curve", "figure8", "corner")
 
@@ -183,7 +187,8 @@ def window_curves(path_xz_BxNx2, length_B, T: int, interval: int, noise=0.0, key
     T = int(T)
     if T < 2:
         raise ValueError(f"T must be >= 2, got {T}")
-    if key is None and not (isinstance(noise, (int, float)) and noise == 0):
+    noise_free = isinstance(noise, (int, float, np.number)) and noise == 0
+    if key is None and not noise_free:
         raise ValueError("window_curves: noise needs a PRNG key (pass key=..., or noise=0.0)")
     dtype = path.dtype
     length = jnp.clip(jnp.asarray(length_B, jnp.int32), 1, N)
@@ -210,7 +215,7 @@ def window_curves(path_xz_BxNx2, length_B, T: int, interval: int, noise=0.0, key
     t_idx = jnp.arange(T)[None, :]
     x = jnp.where(t_idx == 0, 0, jnp.where(t_idx == T - 1, last[:, None], x))
 
-    if key is not None:
+    if not noise_free:
         k_time, k_space = jax.random.split(key)
         step = length.astype(dtype) / T
         spacing = total / (T - 1)
@@ -222,7 +227,8 @@ def window_curves(path_xz_BxNx2, length_B, T: int, interval: int, noise=0.0, key
     return eval_spline(spline, x, interval)
 
 
-_window_curves_jit = jax.jit(window_curves, static_argnames=("T", "interval"))
+_clean_curves_jit = jax.jit(functools.partial(window_curves, noise=0.0, key=None),
+                            static_argnames=("T", "interval"))
 _fit_spline_jit = jax.jit(fit_spline, static_argnames="interval")
 _eval_spline_jit = jax.jit(eval_spline, static_argnames="interval")
 
@@ -233,10 +239,11 @@ _eval_spline_jit = jax.jit(eval_spline, static_argnames="interval")
 
 
 def velocity(x_BxTxD):
-    """v[t] = x[t] - x[t-1] for t >= 1, v[0] = v[1] (CONTRACTS.md). Time is axis -2; T >= 2."""
+    """v[t] = x[t] - x[t-1] for t >= 1; v[0] = x[2] - x[1], the reference's reflection pad of the
+    differences (spec §2.10), so G sees exactly the reference's first input. Time is axis -2; T >= 3."""
     x = jnp.asarray(x_BxTxD)
     d = x[..., 1:, :] - x[..., :-1, :]
-    return jnp.concatenate([d[..., :1, :], d], axis=-2)
+    return jnp.concatenate([d[..., 1:2, :], d], axis=-2)
 
 
 def integrate(start_BxD, v_BxTxD):
@@ -320,19 +327,8 @@ def spline_curve(path_xz_Nx2, T: int, interval: int) -> np.ndarray:
     n = len(path)
     n_pad = -(-n // 512) * 512
     padded = np.concatenate([path, np.repeat(path[-1:], n_pad - n, axis=0)])[None]
-    out = _window_curves_jit(padded, np.array([n], np.int32), T=int(T), interval=int(interval),
-                             noise=0.0, key=jax.random.key(0))
+    out = _clean_curves_jit(padded, np.array([n], np.int32), T=int(T), interval=int(interval))
     return np.asarray(out[0], dtype=np.float64)
-
-
-def _dense_spline(points_Px2: np.ndarray, interval: int, substeps: int = 8) -> np.ndarray:
-    """The spline through the points (point index as the parameter, knots every `interval`
-    points), sampled `substeps` times per point: a polyline that follows it to ~1e-4 of the
-    point spacing."""
-    P = len(points_Px2)
-    spline = _fit_spline_jit(points_Px2[None], np.array([P], np.int32), interval=interval)
-    x = np.arange((P - 1) * substeps + 1, dtype=np.float64)[None] / substeps
-    return np.asarray(_eval_spline_jit(spline, x, interval=interval)[0], dtype=np.float64)
 
 
 def resample_polyline(points_Px2, num_points: int | None = None, spacing: float | None = None,
@@ -344,23 +340,34 @@ def resample_polyline(points_Px2, num_points: int | None = None, spacing: float 
     spacing: metres between consecutive points, i.e. distance per network sample (the speed
       control); gives floor(length / spacing) + 1 points from the start, the remainder shorter
       than one spacing at the end is dropped. Give num_points or spacing, not both.
-    smooth_interval: first replace the curve by the not-a-knot spline through every
-      smooth_interval-th point (the point index as parameter, like frames in window_curves).
+    smooth_interval: follow the not-a-knot spline through every smooth_interval-th point (and
+      the last) instead of the polyline, with the point index as parameter, like frames in
+      window_curves. Output points then lie on the spline, found as in window_curves by
+      inverting its arc-length table (SMOOTH_SUBSTEPS chords per input point).
     Returns (M, 2) float64. Raises DegenerateCurveError for a degenerate curve or one shorter
     than a single spacing.
     """
     pts = check_curve(points_Px2, "curve")
     if num_points is not None and spacing is not None:
         raise ValueError("resample_polyline: give num_points or spacing, not both")
+    P = len(pts)
     if smooth_interval is not None:
-        if int(smooth_interval) < 1:
+        interval = int(smooth_interval)
+        if interval < 1:
             raise ValueError(f"smooth_interval must be >= 1, got {smooth_interval}")
-        pts = _dense_spline(pts, int(smooth_interval))
-    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        spline = _fit_spline_jit(pts[None], np.array([P], np.int32), interval=interval)
+        param = np.arange((P - 1) * SMOOTH_SUBSTEPS + 1, dtype=np.float64) / SMOOTH_SUBSTEPS
+        table = np.asarray(_eval_spline_jit(spline, param[None], interval=interval)[0],
+                           dtype=np.float64)
+    else:
+        param, table = np.arange(P, dtype=np.float64), pts
+    seg = np.linalg.norm(np.diff(table, axis=0), axis=1)
     keep = np.concatenate([[True], seg > 0])  # np.interp needs strictly increasing lengths
     cum = np.concatenate([[0.0], np.cumsum(seg)])[keep]
-    pts = pts[keep]
+    param, table = param[keep], table[keep]
     total = cum[-1]
+    if total <= 0:
+        raise DegenerateCurveError("curve: the smoothed curve has zero length")
     if spacing is not None:
         spacing = float(spacing)
         if not (math.isfinite(spacing) and spacing > 0):
@@ -371,11 +378,15 @@ def resample_polyline(points_Px2, num_points: int | None = None, spacing: float 
                                        f"spacing ({spacing:.4g} m)")
         target = np.arange(count) * spacing
     else:
-        count = len(points_Px2) if num_points is None else int(num_points)
+        count = P if num_points is None else int(num_points)
         if count < 2:
             raise ValueError(f"num_points must be >= 2, got {count}")
         target = np.linspace(0.0, total, count)
-    return np.stack([np.interp(target, cum, pts[:, 0]), np.interp(target, cum, pts[:, 1])], -1)
+    if smooth_interval is None:
+        return np.stack([np.interp(target, cum, table[:, 0]), np.interp(target, cum, table[:, 1])],
+                        -1)
+    x = np.interp(target, cum, param)
+    return np.asarray(_eval_spline_jit(spline, x[None], interval=interval)[0], dtype=np.float64)
 
 
 def curve_from_root_positions(root_Fx3) -> np.ndarray:

@@ -54,6 +54,18 @@ class RowLayout:
         return (self.joint_names, self.parents)
 
 
+def layout_from_parents(joint_names, parents, bone_lengths_m) -> RowLayout:
+    """A layout rebuilt from what a checkpoint stores (no skeleton needed)."""
+    parents = tuple(int(p) for p in parents)
+    return RowLayout(
+        joint_names=tuple(joint_names),
+        parents=parents,
+        source_index=tuple(range(len(parents))),
+        bone_pairs=tuple((parents[k], k) for k in range(1, len(parents))),
+        bone_lengths_m=np.asarray(bone_lengths_m, np.float64),
+    )
+
+
 def representation_root(skeleton: Skeleton) -> int:
     children: dict[int, list[int]] = {j: [] for j in range(skeleton.num_joints)}
     for j, p in enumerate(skeleton.parents):

@@ -29,7 +29,7 @@ import optax
 from flax import nnx, struct
 
 from motiongan_jax import curves, losses
-from motiongan_jax.nn import Discriminator, Generator, SpectralNormState
+from motiongan_jax.nn import Discriminator, Generator, SpectralNormState, init_split
 
 
 @struct.dataclass
@@ -51,14 +51,15 @@ def _num_joints(layout) -> int:
     return rows // 3
 
 
-def _build(cfg, num_joints: int, num_styles: int, key) -> tuple[Generator, Discriminator]:
-    m = cfg.model
-    k_g, k_d = jax.random.split(key)
-    g = Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
-                  num_styles=num_styles, rngs=nnx.Rngs(k_g))
-    d = Discriminator(num_joints, num_styles=num_styles, seq_len=cfg.data.window_T, top=m.top,
-                      kw=m.kw, rngs=nnx.Rngs(k_d))
-    return g, d
+def _build_g(model_cfg, num_joints: int, num_styles: int, key) -> Generator:
+    m = model_cfg
+    return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
+                     num_styles=num_styles, rngs=nnx.Rngs(key))
+
+
+def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key) -> Discriminator:
+    return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
+                         kw=model_cfg.kw, rngs=nnx.Rngs(key))
 
 
 def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransformation]:
@@ -71,19 +72,12 @@ def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransfo
 def init_state(cfg, layout, num_styles: int, key: jax.Array) -> TrainState:
     """Fresh G, D, spectral-norm vectors and both Adam states; step 0."""
     num_joints = _num_joints(layout)
-    abstract_g, abstract_d = nnx.eval_shape(lambda: _build(cfg, num_joints, num_styles, jax.random.key(0)))
-    g_def = nnx.split(abstract_g, nnx.Param)[0]
-    d_def = nnx.split(abstract_d, nnx.Param, SpectralNormState)[0]
+    k_g, k_d = jax.random.split(key)
+    g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles), k_g, nnx.Param)
+    d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_joints, num_styles),
+                                       k_d, nnx.Param, SpectralNormState)
     tx_g, tx_d = optimizers(cfg)
-
-    @jax.jit
-    def arrays(key):
-        g, d = _build(cfg, num_joints, num_styles, key)
-        _, g_params = nnx.split(g, nnx.Param)
-        _, d_params, d_sn = nnx.split(d, nnx.Param, SpectralNormState)
-        return g_params, d_params, d_sn, tx_g.init(g_params), tx_d.init(d_params)
-
-    g_params, d_params, d_sn, opt_g, opt_d = arrays(key)
+    opt_g, opt_d = jax.jit(lambda g, d: (tx_g.init(g), tx_d.init(d)))(g_params, d_params)
     return TrainState(g_params=g_params, d_params=d_params, d_sn_state=d_sn, opt_g_state=opt_g,
                       opt_d_state=opt_d, step=jnp.zeros((), jnp.int32), g_def=g_def, d_def=d_def)
 

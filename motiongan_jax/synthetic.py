@@ -209,31 +209,31 @@ PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(GaitPara
 
 STYLES: dict[str, GaitParams] = {
     "Normal": GaitParams(stride_length=1.40, cadence=1.85, foot_lift=0.10, crouch=0.0, torso_lean=3.0,
-                         head_tilt=0.0, arm_swing=18.0, elbow_bend=15.0, vertical_bounce=0.03,
+                         head_tilt=0.0, arm_swing=18.0, elbow_bend=15.0, vertical_bounce=0.045,
                          lateral_sway=0.025),
     "Marching": GaitParams(stride_length=1.50, cadence=2.00, foot_lift=0.30, crouch=0.0, torso_lean=-2.0,
-                           head_tilt=-5.0, arm_swing=35.0, elbow_bend=5.0, vertical_bounce=0.04,
+                           head_tilt=-5.0, arm_swing=35.0, elbow_bend=5.0, vertical_bounce=0.05,
                            lateral_sway=0.02),
-    "OldMan": GaitParams(stride_length=0.85, cadence=1.50, foot_lift=0.05, crouch=15.0, torso_lean=22.0,
-                         head_tilt=-10.0, arm_swing=8.0, elbow_bend=30.0, vertical_bounce=0.015,
+    "OldMan": GaitParams(stride_length=0.85, cadence=1.50, foot_lift=0.05, crouch=20.0, torso_lean=22.0,
+                         head_tilt=-10.0, arm_swing=8.0, elbow_bend=30.0, vertical_bounce=0.02,
                          lateral_sway=0.035),
     "Sad": GaitParams(stride_length=1.00, cadence=1.45, foot_lift=0.06, crouch=5.0, torso_lean=10.0,
-                      head_tilt=28.0, arm_swing=5.0, elbow_bend=8.0, vertical_bounce=0.015,
+                      head_tilt=28.0, arm_swing=5.0, elbow_bend=8.0, vertical_bounce=0.02,
                       lateral_sway=0.02),
     "Happy": GaitParams(stride_length=1.50, cadence=2.20, foot_lift=0.14, crouch=0.0, torso_lean=-3.0,
-                        head_tilt=-10.0, arm_swing=30.0, elbow_bend=45.0, vertical_bounce=0.07,
+                        head_tilt=-10.0, arm_swing=30.0, elbow_bend=45.0, vertical_bounce=0.08,
                         lateral_sway=0.03),
-    "Sneaky": GaitParams(stride_length=0.90, cadence=1.20, foot_lift=0.16, crouch=25.0, torso_lean=15.0,
-                         head_tilt=-5.0, arm_swing=6.0, elbow_bend=80.0, vertical_bounce=0.01,
+    "Sneaky": GaitParams(stride_length=0.90, cadence=1.20, foot_lift=0.16, crouch=40.0, torso_lean=15.0,
+                         head_tilt=-5.0, arm_swing=6.0, elbow_bend=80.0, vertical_bounce=0.015,
                          lateral_sway=0.02),
     "Strong": GaitParams(stride_length=1.45, cadence=1.70, foot_lift=0.10, crouch=5.0, torso_lean=-4.0,
-                         head_tilt=-5.0, arm_swing=22.0, elbow_bend=30.0, vertical_bounce=0.03,
+                         head_tilt=-5.0, arm_swing=22.0, elbow_bend=30.0, vertical_bounce=0.04,
                          lateral_sway=0.06),
     "Drunk": GaitParams(stride_length=1.10, cadence=1.60, foot_lift=0.06, crouch=8.0, torso_lean=8.0,
-                        head_tilt=12.0, arm_swing=14.0, elbow_bend=20.0, vertical_bounce=0.02,
+                        head_tilt=12.0, arm_swing=14.0, elbow_bend=20.0, vertical_bounce=0.03,
                         lateral_sway=0.10),
     "Childish": GaitParams(stride_length=1.00, cadence=2.50, foot_lift=0.12, crouch=5.0, torso_lean=0.0,
-                           head_tilt=-5.0, arm_swing=35.0, elbow_bend=40.0, vertical_bounce=0.06,
+                           head_tilt=-5.0, arm_swing=35.0, elbow_bend=40.0, vertical_bounce=0.07,
                            lateral_sway=0.035),
 }
 
@@ -321,6 +321,7 @@ _ANKLE_H = -_TOE[1] * _U  # ankle height above the floor with the foot flat
 _HIP_M = np.array(_HIP) * _U
 _BALL_M = np.array(_TOE) * _U
 _HEEL_M = np.array(_HEEL) * _U
+_PC = 0.35
 _SPINE_SHARE = {"pelvis": 0.35, "LowerBack": 0.45, "Spine": 0.15, "Spine1": 0.05}
 
 
@@ -354,12 +355,15 @@ def _path(rng: np.random.Generator, s: np.ndarray):
     return x - x[i0], z - z[i0], heading
 
 
-def _foot_pose(W, psi, alpha):
+def _foot_pose(W, psi, alpha, phi=None):
     """Ankle position of a stance foot whose flat-foot ankle position is W, yaw psi, pitched by
-    alpha (toes up +) about the heel (alpha > 0) or the ball (alpha < 0)."""
+    alpha (toes up +) about the heel (alpha > 0) or the ball (alpha < 0). phi <= 0: the toe
+    segment itself pitched toes-down by -phi about the toe tip, lifting the ball (push-off)."""
     pivot = np.where((alpha > 0)[..., None], _HEEL_M, _BALL_M)
-    rot = _rx(-alpha)
-    return W + _mv(_ry(psi), pivot - _mv(rot, pivot))
+    if phi is not None:
+        tip = np.array([0.0, 0.0, _TOE_END * _U])
+        pivot = pivot + (alpha <= 0)[..., None] * (tip - _mv(_rx(-phi), tip))
+    return W + _mv(_ry(psi), pivot - _mv(_rx(-alpha), np.where((alpha > 0)[..., None], _HEEL_M, _BALL_M)))
 
 
 def _two_link_ik(d):
@@ -378,16 +382,23 @@ def _two_link_ik(d):
     return abd, to_target + inner, knee
 
 
+def clip_params(params: GaitParams, key_or_seed, jitter: float = 0.04) -> GaitParams:
+    """The jittered gait parameters that generate_clip(params, key_or_seed=..., jitter=...)
+    actually walks with: the ground truth of that clip."""
+    return params.jittered(_rng(key_or_seed), jitter)
+
+
 def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: float = 60.0,
                   jitter: float = 0.04, source: str = "<synthetic>") -> Motion:
     """One walk of `num_frames` frames (frame 0 a T-pose) at `fps`, deterministic in the seed.
 
     key_or_seed: int, sequence of non-negative ints, numpy SeedSequence or JAX PRNG key.
-    jitter: relative per-clip variation of the gait parameters (0 disables it)."""
+    jitter: relative per-clip variation of the gait parameters (0 disables it; the path and
+    phase stay the same). The parameters actually used: clip_params(params, key_or_seed, jitter)."""
     if num_frames < 2:
         raise ValueError("num_frames must be >= 2 (frame 0 is the T-pose)")
     rng = _rng(key_or_seed)
-    p = params.jittered(rng, jitter) if jitter > 0 else params
+    p = params.jittered(rng, jitter)  # always the first draw: see clip_params
     F = int(num_frames)
     t = np.arange(F) / fps
     v = p.speed
@@ -425,6 +436,8 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
     theta_to = np.deg2rad(np.clip(50.0 * stride_ratio, 15.0, 60.0))
     p_heel = 0.10  # end of the heel rocker
     p_roll = 0.30 * beta / 0.62  # heel rises from here
+    theta_tt = np.deg2rad(np.clip(30.0 * stride_ratio, 10.0, 35.0))
+    p_toe = beta - 0.08  # the ball rises (pivot on the toe tip) from here
     toe_out = np.deg2rad(7.0)
     legs = {}
     for side, off, sign in (("L", 0.0, 1.0), ("R", 0.5, -1.0)):
@@ -432,7 +445,7 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         k = np.floor(ul).astype(int)
         ph_ = ul - k
         ks = np.arange(k.min() - 1, k.max() + 3)
-        tk = (ks + 0.45 * beta + off - u0) / f  # times when the ankle is under the hip joint
+        tk = (ks + _PC * beta + off - u0) / f  # times when the ankle is under the hip joint
         kx, kz, kh = path_at(tk)
         k_left = np.stack([np.cos(kh), np.zeros_like(kh), -np.sin(kh)], -1)
         k_fwd = np.stack([np.sin(kh), np.zeros_like(kh), np.cos(kh)], -1)
@@ -444,10 +457,11 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         # Stance.
         a_st = np.where(ph_ < p_heel, theta_hs * (1 - _smoothstep(ph_ / p_heel)),
                         -theta_to * np.clip((ph_ - p_roll) / (beta - p_roll), 0.0, 1.0) ** 2)
-        ank_st = _foot_pose(W[i], psi[i], a_st)
+        phi_st = -theta_tt * np.clip((ph_ - p_toe) / (beta - p_toe), 0.0, 1.0) ** 2
+        ank_st = _foot_pose(W[i], psi[i], a_st, phi_st)
         # Swing from stance i (toe-off) to stance i + 1 (heel strike).
         sw = np.clip((ph_ - beta) / (1 - beta), 0.0, 1.0)
-        P0 = _foot_pose(W[i], psi[i], np.full(F, -theta_to))
+        P0 = _foot_pose(W[i], psi[i], np.full(F, -theta_to), np.full(F, -theta_tt))
         P1 = _foot_pose(W[np.minimum(i + 1, len(ks) - 1)], psi[np.minimum(i + 1, len(ks) - 1)],
                         np.full(F, theta_hs))
         m = _min_jerk(sw)
@@ -459,28 +473,36 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         ankle = np.where(stance[:, None], ank_st, ank_sw)
         alpha = np.where(stance, a_st, a_sw)
         yaw = np.where(stance, psi[i], psi_sw)
-        toe = np.where(stance, np.maximum(-a_st, 0.0), theta_to * (1 - _smoothstep(sw / 0.35)))
+        toe = np.where(stance, np.maximum(phi_st - a_st, 0.0),
+                       (theta_to - theta_tt) * (1 - _smoothstep(sw / 0.35)))
         # Reach matters for the pelvis height only while the foot is (nearly) on the ground.
         relax = 0.5 * _smoothstep(sw / 0.3) * (1.0 - _smoothstep((sw - 0.5) / 0.3))
         legs[side] = (ankle, alpha, yaw, toe, sign, relax)
 
     # Pelvis height: crouch-dependent standing height, minus the bounce, capped by leg reach.
     stand = _ANKLE_H + _leg_reach(8.0 + p.crouch) - _HIP_M[1]
-    nominal = stand - p.vertical_bounce * 0.5 * (1 - np.cos(4 * np.pi * (uL - beta / 2)))
+    shape = 0.5 * (1 - np.cos(4 * np.pi * (uL - beta / 2)))  # 1 at the double supports
+    nominal = stand - p.vertical_bounce * shape
     caps = []
-    reach = _leg_reach(6.0)
+    reach = _leg_reach(6.0 + p.crouch)
     for side, (ankle, _, _, _, sign, relax) in legs.items():
         off = _mv(R_root, _HIP_M * np.array([sign, 1.0, 1.0]))
         hip_xz = root_xz + off * np.array([1.0, 0.0, 1.0])
         dh2 = np.sum((ankle - hip_xz) * np.array([1.0, 0.0, 1.0]) * (ankle - hip_xz), -1)
         caps.append(ankle[:, 1] + np.sqrt(np.maximum(reach ** 2 - dh2, 0.05 ** 2)) - off[:, 1] + relax)
-    # Smooth lower envelope of the reach cap (its dips at double support are V-shaped), then a
-    # soft minimum with the nominal height.
+    # The reach cap dips (V-shaped) at the double supports; the longer the stride, the deeper.
+    # (a) Its smooth lower envelope; (b) the bounce curve lowered as a whole (over a window of
+    # one gait cycle) until it fits under the cap, so that the pelvis excursion is the
+    # vertical_bounce parameter also where the stride alone would make it larger. The pelvis
+    # height is the soft minimum of (a), (b) and the nominal height.
     cap = np.min(caps, 0)
-    width = max(3, int(round(0.15 * fps / f)))
-    cap = gaussian_filter1d(minimum_filter1d(cap, size=width, mode="nearest"), sigma=width / 3, mode="nearest")
-    tau = 0.008
-    both = np.stack([nominal, cap])
+    width = max(3, int(round(0.08 * fps / f)))
+    env = gaussian_filter1d(minimum_filter1d(cap, size=width, mode="nearest"), sigma=width / 3, mode="nearest")
+    cycle = max(3, int(round(fps / f)))
+    level = gaussian_filter1d(minimum_filter1d(cap + p.vertical_bounce * shape, size=cycle, mode="nearest"),
+                              sigma=cycle / 4, mode="nearest")
+    tau = 0.003
+    both = np.stack([nominal, env, level - p.vertical_bounce * shape])
     low = both.min(0)
     root_y = low - tau * np.log(np.sum(np.exp(-(both - low) / tau), 0))
     root = root_xz + np.array([0.0, 1.0, 0.0]) * root_y[:, None]
@@ -597,6 +619,8 @@ def dataset_manifest(*, seed: int, clips_per_style: int, seconds: float, fps: fl
                         "head_tilt": "deg, down +", "arm_swing": "deg (amplitude)",
                         "elbow_bend": "deg", "vertical_bounce": "m", "lateral_sway": "m"},
         "styles": {s: STYLES[s].to_dict() for s in styles},
+        "clips": {f"{s}_{n:02d}": clip_params(STYLES[s], clip_seed(seed, s, n)).to_dict()
+                  for s in styles for n in range(1, clips_per_style + 1)},
     }
 
 

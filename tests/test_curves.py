@@ -231,7 +231,10 @@ def test_spline_curve_matches_the_independent_reference():
 
 def test_velocity_by_hand_and_reflected_first_element():
     x = jnp.array([[0.0], [1.0], [3.0], [6.0]])
-    np.testing.assert_array_equal(curves.velocity(x), [[1.0], [1.0], [2.0], [3.0]])
+    # differences 1, 2, 3; the first element reflects to the second difference (numpy 'reflect')
+    np.testing.assert_array_equal(curves.velocity(x), [[2.0], [1.0], [2.0], [3.0]])
+    d = np.diff(np.asarray(x), axis=0)
+    np.testing.assert_array_equal(curves.velocity(x), np.pad(d, ((1, 0), (0, 0)), mode="reflect"))
     np.testing.assert_array_equal(curves.integrate(jnp.array([0.0]), jnp.array(
         [[99.0], [1.0], [2.0], [3.0]])), x)  # v[0] is ignored
 
@@ -241,7 +244,7 @@ def test_velocity_integrate_round_trip(shape):
     x = jax.random.normal(jax.random.key(0), shape)
     v = curves.velocity(x)
     chex.assert_shape(v, shape)
-    np.testing.assert_array_equal(v[..., 0, :], v[..., 1, :])
+    np.testing.assert_array_equal(v[..., 0, :], v[..., 2, :])
     np.testing.assert_allclose(curves.integrate(x[..., 0, :], v), x, atol=1e-5)
 
 
@@ -288,6 +291,8 @@ def test_circle_closes_with_its_radius_and_length():
     np.testing.assert_allclose(p[-1], p[0], atol=1e-9)
     np.testing.assert_allclose(np.linalg.norm(p - [0, r], axis=1), r, atol=1e-9)
     np.testing.assert_allclose(polyline_length(p), 2 * math.pi * r, rtol=1e-4)
+    laps = curves.shape_curve("circle", scale=r, length=4 * math.pi * r, num_points=401)
+    np.testing.assert_allclose(laps[[200, 400]], [[0, 0], [0, 0]], atol=1e-9)  # two laps
     f8 = curves.shape_curve("figure8", scale=r, num_points=401)
     np.testing.assert_allclose(f8[-1], [0, 0], atol=1e-9)
     np.testing.assert_allclose(f8[200], [0, 0], atol=1e-9)  # the crossing, half way

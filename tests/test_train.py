@@ -1,0 +1,163 @@
+"""The training loop: reproducibility, resume, SIGKILL, non-finite stops, the command line."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import jax
+import numpy as np
+import pytest
+
+from motiongan_jax import checkpoint, curves, data, step as step_lib, train as train_lib
+from motiongan_jax.config import load_config, override
+
+
+@pytest.fixture(scope="module")
+def tiny(repo):
+    return load_config(repo / "configs" / "tiny.py")
+
+
+def _params(workdir, step=None):
+    state, meta, _, _ = checkpoint.load_run(workdir, step)
+    return state, meta
+
+
+def _assert_bit_identical(a, b):
+    la, lb = jax.tree.leaves((a.g_params, a.d_params, a.d_sn_state, a.opt_g_state, a.opt_d_state)), \
+        jax.tree.leaves((b.g_params, b.d_params, b.d_sn_state, b.opt_g_state, b.opt_d_state))
+    assert len(la) == len(lb)
+    for x, y in zip(la, lb):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.fixture(scope="module")
+def unbroken(tiny, tmp_path_factory):
+    """A 4-step tiny run without interruption: the reference for the other tests."""
+    wd = tmp_path_factory.mktemp("unbroken")
+    metrics = train_lib.train(tiny, wd, progress=False, log=lambda s: None)
+    return wd, metrics
+
+
+def test_run_writes_metrics_checkpoints_and_lists(unbroken, tiny):
+    wd, metrics = unbroken
+    lines = [json.loads(x) for x in (wd / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in lines] == [1, 2, 3, 4]
+    for key in ("d_adv", "d_cls", "g_adv", "g_cls", "g_curve", "g_bone", "d_acc_real", "d_acc_fake",
+                "g_grad_norm", "g_param_norm", "g_update_norm", "d_grad_norm"):
+        assert key in lines[-1] and np.isfinite(lines[-1][key]), key
+    assert sorted(int(p.name) for p in (wd / "checkpoints").iterdir() if p.name.isdigit()) == [2, 4]
+    assert (wd / "train_files.txt").read_text().strip() and (wd / "val_files.txt").read_text().strip()
+    state, meta = _params(wd)
+    assert int(state.step) == 4 and meta["config"]["name"] == "tiny"
+
+
+def test_same_seed_same_parameters(unbroken, tiny, tmp_path):
+    train_lib.train(tiny, tmp_path, progress=False, log=lambda s: None)
+    _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
+
+
+def test_other_seed_other_parameters(unbroken, tiny, tmp_path):
+    train_lib.train(override(tiny, ["train.seed=1", "train.num_steps=2"]), tmp_path, progress=False, log=lambda s: None)
+    a, _ = _params(unbroken[0], 2)
+    b, _ = _params(tmp_path, 2)
+    assert not np.array_equal(np.asarray(jax.tree.leaves(a.g_params)[0]), np.asarray(jax.tree.leaves(b.g_params)[0]))
+
+
+def test_resume_equals_unbroken_even_after_a_half_written_checkpoint(unbroken, tiny, tmp_path):
+    train_lib.train(override(tiny, ["train.num_steps=2"]), tmp_path, progress=False, log=lambda s: None)
+    # what a process killed inside a save leaves behind: orbax's temporary directory
+    partial = tmp_path / "checkpoints" / "3.orbax-checkpoint-tmp-1234567"
+    (partial / "state").mkdir(parents=True)
+    (partial / "state" / "garbage").write_bytes(b"\0" * 100)
+    logs = []
+    train_lib.train(tiny, tmp_path, progress=False, log=logs.append)
+    assert any("resumed from checkpoint at step 2" in s for s in logs)
+    _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
+    steps = [json.loads(x)["step"] for x in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert steps == [1, 2, 3, 4]
+
+
+def test_sigkill_and_restart_equals_unbroken(unbroken, repo, tmp_path):
+    """Kill the command-line trainer with SIGKILL at several moments, restart it each time."""
+    cmd = [sys.executable, str(repo / "bin" / "train.py"), "--config", str(repo / "configs" / "tiny.py"),
+           "--workdir", str(tmp_path), "--no-progress", "--set", "train.checkpoint_every=1"]
+    rng = np.random.default_rng(0)
+    ckdir = tmp_path / "checkpoints"
+
+    def latest():
+        return max((int(p.name) for p in ckdir.iterdir() if p.name.isdigit()), default=0) if ckdir.is_dir() else 0
+
+    for _ in range(2):
+        before = latest()
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        # once it has saved a new checkpoint, kill it at a random moment (often inside the next save)
+        deadline = time.time() + 240
+        while time.time() < deadline and latest() == before and proc.poll() is None:
+            time.sleep(0.01)
+        time.sleep(float(rng.uniform(0.0, 0.2)))
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    # checkpoint_every differs from the unbroken run: it changes nothing but when saves happen
+    _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
+
+
+def test_non_finite_stops_with_step_and_term(tiny, tmp_path, monkeypatch):
+    real = data.make_sample_batch
+
+    def poisoned(cfg, batch_size):
+        sample = real(cfg, batch_size)
+
+        def sample_batch(arrays, key, step):
+            batch = sample(arrays, key, step)
+            bad = jax.numpy.where(step >= 2, jax.numpy.nan, 0.0)  # from the 3rd step on
+            return {**batch, "curve_BxTx3": batch["curve_BxTx3"] + bad}
+
+        return sample_batch
+
+    monkeypatch.setattr(data, "make_sample_batch", poisoned)
+    with pytest.raises(train_lib.NonFiniteError, match=r"step 3: .*g_curve"):
+        train_lib.train(tiny, tmp_path, progress=False, log=lambda s: None)
+    assert checkpoint.manager(tmp_path / "checkpoints").latest_step() == 2
+
+
+def test_style_label_changes_the_output_after_training(unbroken):
+    state, meta = _params(unbroken[0])
+    T = meta["window_T"]
+    curve = np.stack([np.linspace(0, 2, T), np.zeros(T), np.zeros(T)], -1)[None].repeat(2, 0)
+    vel = curves.velocity(jax.numpy.asarray(curve, jax.numpy.float32))
+    _, pose = step_lib.generator_apply(state, vel, jax.numpy.array([0, 1]))
+    diff = float(np.abs(pose[0] - pose[1]).mean() / (np.abs(pose).mean() + 1e-12))
+    assert diff > 0.05, diff
+
+
+def test_command_line_errors(repo, tmp_path):
+    base = [sys.executable, str(repo / "bin" / "train.py"), "--config", str(repo / "configs" / "tiny.py"),
+            "--workdir", str(tmp_path / "wd")]
+    res = subprocess.run(base + ["--set", "data.frame_nums=60"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "data.frame_nums" in res.stderr
+    res = subprocess.run(base + ["--data", str(tmp_path / "missing")], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "data.data_dir" in res.stderr
+    res = subprocess.run(base + ["--set", "model.nope=1"], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and "model.nope" in res.stderr
+    assert not (tmp_path / "wd").exists()
+
+
+def test_incompatible_checkpoint_is_refused(unbroken, tiny, tmp_path):
+    import shutil
+
+    shutil.copytree(unbroken[0] / "checkpoints", tmp_path / "checkpoints")
+    with pytest.raises(checkpoint.CheckpointError, match="incompatible"):
+        train_lib.train(override(tiny, ["model.top=8", "train.num_steps=6"]), tmp_path, progress=False,
+                        log=lambda s: None)
+
+
+def test_dry_run_prints_parameter_counts(repo):
+    res = subprocess.run([sys.executable, str(repo / "bin" / "train.py"), "--config", str(repo / "configs" / "tiny.py"),
+                          "--workdir", "unused", "--dry-run"], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "generator" in res.stdout.lower() and "discriminator" in res.stdout.lower()
