@@ -253,12 +253,12 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         g_params = optax.apply_updates(state.g_params, g_updates)
 
         metrics = {**d_terms, **g_terms,
-                   "g_grad_norm": optax.global_norm(g_grads),
-                   "g_param_norm": optax.global_norm(g_params),
-                   "g_update_norm": optax.global_norm(g_updates),
-                   "d_grad_norm": optax.global_norm(d_grads),
-                   "d_param_norm": optax.global_norm(d_params),
-                   "d_update_norm": optax.global_norm(d_updates)}
+                   "g_grad_norm": optax.tree.norm(g_grads),
+                   "g_param_norm": optax.tree.norm(g_params),
+                   "g_update_norm": optax.tree.norm(g_updates),
+                   "d_grad_norm": optax.tree.norm(d_grads),
+                   "d_param_norm": optax.tree.norm(d_params),
+                   "d_update_norm": optax.tree.norm(d_updates)}
         new_state = state.replace(g_params=g_params, d_params=d_params, d_sn_state=sn,
                                   opt_g_state=opt_g, opt_d_state=opt_d, step=state.step + 1)
         return new_state, metrics

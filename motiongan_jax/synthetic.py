@@ -15,28 +15,34 @@ Conventions (the same as CMU files):
 - Frame 0 is a T-pose (all rotations zero), like CMU trials; data.start_offset = 1 drops it.
 
 How a walk is made (`generate_clip`):
-1. Per-clip jitter: each gait parameter is scaled by (1 + 0.04 n), n ~ N(0, 1) clipped to +-2.
+1. Per-clip jitter: each gait parameter is scaled by (1 + 0.04 n), n ~ N(0, 1) clipped to +-2
+   (`clip_params` returns the clip's actual parameters; styles.json lists them per file).
 2. Path: the root's floor path has constant speed v = stride_length * cadence / 2 (m/s; a stride
    is two steps, cadence is steps per second). Its heading integrates a random curvature along
    arc length: a few gentle sinusoidal components (radius mostly > 5 m) plus occasional sharp
    turns (Gaussian curvature bumps of 45-120 degrees over ~1-2 m, about one per 12 m). Root yaw
-   = path tangent. The path passes through the origin at t = 0 with a random heading.
+   = path tangent (+ a small pelvis twist). The path passes through the origin at t = 0.
 3. Gait phase: stride frequency f = cadence / 2; left leg phase u, right leg u + 0.5. Each foot
-   has a stance fraction (0.55-0.68, shorter when faster) with heel rocker, flat foot and a
-   forefoot rocker (heel rises, foot rolls over the ball, toes stay flat), and a swing phase.
-   Stance feet are planted in the world (no skating): the foot's flat position is where the
-   body is at mid-stance, offset sideways by half the step width. The swing ankle moves along a
+   has a stance fraction (0.55-0.68, shorter when faster) with a heel rocker, a flat foot, a
+   forefoot rocker (heel rises, the foot rolls over the ball, toes flat) and a push-off (the
+   ball rises, pivoting on the toe tip), then a swing phase. Stance feet are planted in the
+   world (no skating): the flat foot lies where the body is at 35% of the stance, offset
+   sideways by half the step width, toes out 7 degrees. The swing ankle moves along a
    minimum-jerk path from toe-off to the next heel strike, lifted by `foot_lift`.
 4. Pelvis: twist, obliquity, lateral sway toward the stance foot, a forward tilt (part of the
-   torso lean); height = the crouch-dependent standing height lowered by the vertical bounce
-   twice per stride, capped (soft minimum) so that both legs can reach their ankle targets.
+   torso lean). Height: the soft minimum of (a) the crouch-dependent standing height minus the
+   bounce curve (vertical_bounce * (1 - cos) / 2, lowest at the double supports), (b) the
+   smooth lower envelope of what both legs can reach, and (c) the bounce curve lowered as a
+   whole until it fits under (b), so that the pelvis excursion is vertical_bounce even where
+   the stride alone would make it larger.
 5. Legs by analytic two-link IK (hip abduction Z, hip flexion X, knee X; ankle orientation
-   solved so the foot has its planned yaw and pitch; toe joint keeps the toes flat).
+   solved so the foot has its planned yaw and pitch; the toe joint keeps the toes flat).
 6. Upper body: spine lean and counter-rotation, head tilt, counter-phase arm swing with elbow
    bend, arms hanging toward the vertical.
 7. Floor: forward kinematics (kinematics.world_positions) gives the lowest foot point per
    frame; the root is moved down by that height (a running minimum over ~0.1 s, lightly
-   smoothed, so feet never sink because of the smoothing).
+   smoothed, never more than the frame's own height, so smoothing never sinks a foot). With
+   the planted feet above this is a safety net: the correction is ~0.
 """
 
 from __future__ import annotations
@@ -169,7 +175,7 @@ class GaitParams:
     foot_lift: float  # [m] peak rise of the swing ankle above its stance height ("knee lift")
     crouch: float  # [deg] extra knee flexion at mid-stance (lowers the pelvis)
     torso_lean: float  # [deg] forward lean of the trunk (pelvis tilt + spine), forward +
-    head_tilt: float  # [deg] head pitch relative to the trunk, down +
+    head_tilt: float  # [deg] neck + head flexion relative to the trunk, down +
     arm_swing: float  # [deg] shoulder flexion amplitude (half the forward-backward range)
     elbow_bend: float  # [deg] mean elbow flexion
     vertical_bounce: float  # [m] pelvis drop at double support below mid-stance height
@@ -215,7 +221,7 @@ STYLES: dict[str, GaitParams] = {
                            head_tilt=-5.0, arm_swing=35.0, elbow_bend=5.0, vertical_bounce=0.05,
                            lateral_sway=0.02),
     "OldMan": GaitParams(stride_length=0.85, cadence=1.50, foot_lift=0.05, crouch=20.0, torso_lean=22.0,
-                         head_tilt=-10.0, arm_swing=8.0, elbow_bend=30.0, vertical_bounce=0.02,
+                         head_tilt=-12.0, arm_swing=8.0, elbow_bend=30.0, vertical_bounce=0.02,
                          lateral_sway=0.035),
     "Sad": GaitParams(stride_length=1.00, cadence=1.45, foot_lift=0.06, crouch=5.0, torso_lean=10.0,
                       head_tilt=28.0, arm_swing=5.0, elbow_bend=8.0, vertical_bounce=0.02,
@@ -224,7 +230,7 @@ STYLES: dict[str, GaitParams] = {
                         head_tilt=-10.0, arm_swing=30.0, elbow_bend=45.0, vertical_bounce=0.08,
                         lateral_sway=0.03),
     "Sneaky": GaitParams(stride_length=0.90, cadence=1.20, foot_lift=0.16, crouch=40.0, torso_lean=15.0,
-                         head_tilt=-5.0, arm_swing=6.0, elbow_bend=80.0, vertical_bounce=0.015,
+                         head_tilt=-8.0, arm_swing=6.0, elbow_bend=80.0, vertical_bounce=0.015,
                          lateral_sway=0.02),
     "Strong": GaitParams(stride_length=1.45, cadence=1.70, foot_lift=0.10, crouch=5.0, torso_lean=-4.0,
                          head_tilt=-5.0, arm_swing=22.0, elbow_bend=30.0, vertical_bounce=0.04,
@@ -321,7 +327,7 @@ _ANKLE_H = -_TOE[1] * _U  # ankle height above the floor with the foot flat
 _HIP_M = np.array(_HIP) * _U
 _BALL_M = np.array(_TOE) * _U
 _HEEL_M = np.array(_HEEL) * _U
-_PC = 0.35
+_FOOT_UNDER_HIP = 0.35  # fraction of the stance at which the flat foot is under the hip joint
 _SPINE_SHARE = {"pelvis": 0.35, "LowerBack": 0.45, "Spine": 0.15, "Spine1": 0.05}
 
 
@@ -332,26 +338,34 @@ def _leg_reach(knee_flex_deg: float) -> float:
 
 
 def _path(rng: np.random.Generator, s: np.ndarray):
-    """Random smooth floor path sampled at arc lengths s (increasing, metres).
+    """Random smooth floor path sampled at arc lengths s (increasing, metres, s[0] <= 0).
 
-    Returns (x, z, heading) with heading = atan2(dx/ds, dz/ds) (0 = +Z)."""
-    span = float(s[-1] - s[0])
+    Returns (x, z, heading) with heading = atan2(dx/ds, dz/ds) (0 = +Z) and (x, z) = 0 at s = 0.
+    The shape as a function of s does not depend on the range of s (the sharp turns are two
+    Poisson processes walking away from s = 0 with their own generators), and the number of
+    draws from `rng` is fixed."""
+    heading0 = rng.uniform(-np.pi, np.pi)
     kappa = np.zeros_like(s)
     for _ in range(3):  # gentle: wavelengths 8-30 m, |kappa| mostly < 0.2 1/m
-        lam = rng.uniform(8.0, 30.0)
-        kappa += rng.normal(0.0, 0.07) * np.sin(2 * np.pi * s / lam + rng.uniform(0, 2 * np.pi))
-    n_sharp = rng.poisson(span / 12.0)
-    for _ in range(n_sharp):  # sharper turns: 45-120 degrees over ~1-2 m
-        centre = rng.uniform(s[0], s[-1])
-        width = rng.uniform(0.5, 1.0)
-        angle = np.deg2rad(rng.uniform(45.0, 120.0)) * rng.choice([-1.0, 1.0])
-        kappa += angle / (width * np.sqrt(2 * np.pi)) * np.exp(-0.5 * ((s - centre) / width) ** 2)
+        lam, amp, phase = rng.uniform(8.0, 30.0), rng.normal(0.0, 0.07), rng.uniform(0, 2 * np.pi)
+        kappa += amp * np.sin(2 * np.pi * s / lam + phase)
+    for direction in (1.0, -1.0):  # sharper turns: 45-120 degrees over ~1-2 m, one per ~12 m
+        sub = np.random.default_rng(rng.integers(0, 2 ** 63))
+        centre = 0.0
+        while True:
+            centre += direction * sub.exponential(12.0)
+            if not s[0] - 3.0 <= centre <= s[-1] + 3.0:
+                break
+            width = sub.uniform(0.5, 1.0)
+            angle = np.deg2rad(sub.uniform(45.0, 120.0)) * sub.choice([-1.0, 1.0])
+            kappa += angle / (width * np.sqrt(2 * np.pi)) * np.exp(-0.5 * ((s - centre) / width) ** 2)
     ds = np.diff(s)
-    heading = rng.uniform(-np.pi, np.pi) + np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)])
+    i0 = int(np.argmin(np.abs(s)))  # s = 0 is on the grid
+    heading = np.concatenate([[0.0], np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)])
+    heading = heading0 + heading - heading[i0]
     mid = 0.5 * (heading[1:] + heading[:-1])
     x = np.concatenate([[0.0], np.cumsum(np.sin(mid) * ds)])
     z = np.concatenate([[0.0], np.cumsum(np.cos(mid) * ds)])
-    i0 = int(np.argmin(np.abs(s)))  # the path passes through the origin at s = 0
     return x - x[i0], z - z[i0], heading
 
 
@@ -408,7 +422,8 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
 
     # Path on an extended time range so that footholds before/after the clip exist.
     pad = 2.0 / f + 1.0
-    t_ext = np.arange(-pad, t[-1] + pad + 0.5 / fps, 0.5 / fps)
+    step = 0.5 / fps
+    t_ext = np.arange(-int(np.ceil(pad / step)), int(np.ceil((t[-1] + pad) / step)) + 1) * step
     px, pz, ph = _path(rng, v * t_ext)
 
     def path_at(tt):
@@ -418,7 +433,6 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
     u0 = rng.uniform(0.0, 1.0)
     u = u0 + f * t
     x, z, heading = path_at(t)
-    fwd = np.stack([np.sin(heading), np.zeros(F), np.cos(heading)], -1)
     left = np.stack([np.cos(heading), np.zeros(F), -np.sin(heading)], -1)
 
     # Pelvis.
@@ -445,7 +459,7 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         k = np.floor(ul).astype(int)
         ph_ = ul - k
         ks = np.arange(k.min() - 1, k.max() + 3)
-        tk = (ks + _PC * beta + off - u0) / f  # times when the ankle is under the hip joint
+        tk = (ks + _FOOT_UNDER_HIP * beta + off - u0) / f  # times when the ankle is under the hip joint
         kx, kz, kh = path_at(tk)
         k_left = np.stack([np.cos(kh), np.zeros_like(kh), -np.sin(kh)], -1)
         k_fwd = np.stack([np.sin(kh), np.zeros_like(kh), np.cos(kh)], -1)
@@ -536,7 +550,7 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         put(name, np.stack([-np.rad2deg(obliquity) * (0.7 if name == "LowerBack" else 0.0),
                             -0.5 * np.rad2deg(twist), np.full(F, share * lean)], -1))
     bob = 2.0 * np.cos(4 * np.pi * (uL - beta / 2)) * p.vertical_bounce / 0.05
-    head = 0.5 * (p.head_tilt - 0.6 * lean) + 0.5 * bob
+    head = 0.5 * p.head_tilt + 0.5 * bob  # split over Neck1 and Head
     put("Neck1", np.stack([np.zeros(F), 0.25 * np.rad2deg(twist), head], -1))
     put("Head", np.stack([np.zeros(F), 0.25 * np.rad2deg(twist), head], -1))
 
@@ -616,7 +630,7 @@ def dataset_manifest(*, seed: int, clips_per_style: int, seconds: float, fps: fl
         "per_clip_jitter": "each parameter scaled by (1 + 0.04 n), n ~ N(0,1) clipped to +-2",
         "param_units": {"stride_length": "m per gait cycle (two steps)", "cadence": "steps/s",
                         "foot_lift": "m", "crouch": "deg", "torso_lean": "deg, forward +",
-                        "head_tilt": "deg, down +", "arm_swing": "deg (amplitude)",
+                        "head_tilt": "deg, down +, relative to the trunk", "arm_swing": "deg (amplitude)",
                         "elbow_bend": "deg", "vertical_bounce": "m", "lateral_sway": "m"},
         "styles": {s: STYLES[s].to_dict() for s in styles},
         "clips": {f"{s}_{n:02d}": clip_params(STYLES[s], clip_seed(seed, s, n)).to_dict()

@@ -211,8 +211,17 @@ def test_frame0_is_tpose_and_jitter():
     a = synthetic.generate_clip(p, key_or_seed=1, num_frames=61, jitter=0.0)
     b = synthetic.generate_clip(p, key_or_seed=1, num_frames=61, jitter=0.04)
     assert not np.array_equal(a.values, b.values)
-    # jitter changes the gait, not the path: the root heads the same way
-    np.testing.assert_allclose(a.values[1, [0, 2]], b.values[1, [0, 2]], atol=1.0)
+    # jitter changes the gait, not the path's shape: same start, same initial heading
+    fa, fb = hips_forward(world_m(a)[1:11]), hips_forward(world_m(b)[1:11])
+    assert np.degrees(np.arccos(np.clip(np.sum(fa * fb, 1), -1, 1))).max() < 3.0
+
+
+def test_longer_clip_extends_the_same_walk():
+    p = synthetic.STYLES["Drunk"]
+    short = synthetic.generate_clip(p, key_or_seed=9, num_frames=301, fps=60.0)
+    long = synthetic.generate_clip(p, key_or_seed=9, num_frames=901, fps=60.0)
+    # identical except within ~1.5 s of the short clip's end (smoothing windows see the end)
+    np.testing.assert_allclose(short.values[:200], long.values[:200], rtol=0, atol=1e-9)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -310,13 +319,15 @@ def test_style_parameters_are_visible(walks):
         y = walks[style][2][:, 0, 1]
         return np.percentile(y, 95) - np.percentile(y, 5)
 
-    def sway(style):  # pelvis side-to-side excursion about its cycle-averaged path
+    def sway(style):  # amplitude of the pelvis' side-to-side motion at the stride frequency
         params, _, w = walks[style]
         n = int(round(FPS / params.stride_frequency))
-        dev = w[n // 2:len(w) - n + 1 + n // 2, 0][:, [0, 2]] - moving_average(w[:, 0][:, [0, 2]], n)
-        lr = (w[:, IDX["LeftUpLeg"]] - w[:, IDX["RightUpLeg"]])[n // 2:len(w) - n + 1 + n // 2][:, [0, 2]]
+        mid = slice(n // 2, len(w) - n + 1 + n // 2)
+        dev = w[mid, 0][:, [0, 2]] - moving_average(w[:, 0][:, [0, 2]], n)
+        lr = (w[mid, IDX["LeftUpLeg"]] - w[mid, IDX["RightUpLeg"]])[:, [0, 2]]
         lat = np.sum(dev * lr, 1) / np.linalg.norm(lr, axis=1)
-        return np.percentile(lat, 95) - np.percentile(lat, 5)
+        t = np.arange(len(lat)) / FPS
+        return 2 * np.abs(np.mean(lat * np.exp(-2j * np.pi * stride_frequency(w, FPS) * t)))
 
     def elbow(style):
         w = walks[style][2]
@@ -334,7 +345,7 @@ def test_style_parameters_are_visible(walks):
 
     assert knee_height("Marching") > knee_height("Normal") + 0.08
     assert torso_lean_deg(walks["OldMan"][2]) > torso_lean_deg(walks["Normal"][2]) + 10.0
-    assert hip_height("Sneaky") < hip_height("Normal") - 0.03
+    assert hip_height("Sneaky") < hip_height("Normal") - 0.02
     assert stance_knee("Sneaky") > stance_knee("Normal") + 20.0
     assert head_pitch("Sad") > head_pitch("Normal") + 15.0
     assert arm_range("Marching") > 2 * arm_range("Sad")
@@ -354,8 +365,7 @@ def test_style_parameters_are_visible(walks):
     for param, measured in pairs.items():
         truth = [getattr(walks[s][0], param) for s in styles]
         r = np.corrcoef(truth, measured)[0, 1]
-        print(param, r)
-        assert r > (0.7 if param in ("crouch", "lateral_sway") else 0.8), (param, r)
+        assert r > (0.7 if param == "crouch" else 0.8), (param, r)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -33,6 +33,11 @@ from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, unifor
 PADDED_ROWS = 81
 
 
+def flatten_channel_major(x_BxTx1xC: jax.Array) -> jax.Array:
+    """B x T' x 1 x C -> B x (C·T'), index c·T' + t: PyTorch's flatten of B x C x T' x 1."""
+    return jnp.transpose(x_BxTx1xC[:, :, 0, :], (0, 2, 1)).reshape(x_BxTx1xC.shape[0], -1)
+
+
 class Discriminator(nnx.Module):
     def __init__(
         self,
@@ -90,7 +95,7 @@ class Discriminator(nnx.Module):
         x = self.features(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
         x = leaky_relu(self.c2_0(x, update_stats=update_stats))
         x = leaky_relu(self.c3_0(x, update_stats=update_stats))  # B x T/16 x 1 x 8top
-        flat = jnp.transpose(x[:, :, 0, :], (0, 2, 1)).reshape(x.shape[0], -1)  # c·T' + t
+        flat = flatten_channel_major(x)
         adv_B = self.l_last(flat, update_stats=update_stats)[:, 0]
         cls_BxC = self.l_cls(flat, update_stats=update_stats)
         return adv_B, cls_BxC

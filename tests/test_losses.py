@@ -1,0 +1,102 @@
+"""Losses: hand-computed values, PyTorch's BCE clamp and gradient, zero-loss invariants."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from motiongan_jax import curves, losses
+
+
+def test_bce_prob_hand():
+    p = jnp.array([0.8, 0.3])
+    got = float(losses.bce_prob(p, 0.9))
+    want = -0.5 * ((0.9 * math.log(0.8) + 0.1 * math.log(0.2)) + (0.9 * math.log(0.3) + 0.1 * math.log(0.7)))
+    assert abs(got - want) < 1e-6
+    assert abs(got - 0.740508) < 1e-5  # (0.361774 + 1.119243) / 2
+
+
+def test_bce_log_clamp_at_minus_100():
+    # log 0 is clamped to -100, as in PyTorch: BCE(0, 1) = 100, BCE(1, 0.9) = 0.1 * 100
+    np.testing.assert_allclose(float(losses.bce_prob(jnp.array([0.0]), 1.0)), 100.0)
+    np.testing.assert_allclose(float(losses.bce_prob(jnp.array([1.0]), 0.9)), 10.0, rtol=1e-6)
+    # saturated sigmoid in the reference's probability form
+    np.testing.assert_allclose(float(losses.adversarial_loss(jnp.array([200.0]), 0.1, "bce_prob")), 90.0, rtol=1e-6)
+
+
+def test_bce_gradient_is_pytorchs():
+    p = jnp.array([0.8, 0.3, 1.0])
+    grad = np.asarray(jax.grad(lambda p: losses.bce_prob(p, 0.9))(p))
+    # (p - t) / max(p (1 - p), 1e-12) / N, not zeroed by the clamp at p = 1
+    want = np.array([(0.8 - 0.9) / (0.8 * 0.2), (0.3 - 0.9) / (0.3 * 0.7), 0.1 / 1e-12]) / 3
+    np.testing.assert_allclose(grad, want, rtol=1e-5)
+
+
+def test_prob_and_logit_adversarial_agree_away_from_saturation():
+    logits = jnp.linspace(-6.0, 6.0, 25)
+    for target in (losses.REAL_TARGET, losses.FAKE_TARGET):
+        a = losses.adversarial_loss(logits, target, "bce_prob")
+        b = losses.adversarial_loss(logits, target, "bce_logit")
+        np.testing.assert_allclose(float(a), float(b), rtol=1e-5)
+        ga = jax.grad(lambda x: losses.adversarial_loss(x, target, "bce_prob"))(logits)
+        gb = jax.grad(lambda x: losses.adversarial_loss(x, target, "bce_logit"))(logits)
+        np.testing.assert_allclose(np.asarray(ga), np.asarray(gb), rtol=1e-4, atol=1e-7)
+
+
+def test_class_loss_hand():
+    logits = jnp.array([[0.0, 0.0, math.log(2.0)]])  # softmax = (1/4, 1/4, 1/2)
+    label = jnp.array([2])
+    prob = float(losses.class_loss(logits, label, "bce_prob"))
+    # BCE on softmax probabilities against one-hot, averaged over the 3 elements: not a CE
+    assert abs(prob - (-(2 * math.log(0.75) + math.log(0.5)) / 3)) < 1e-6
+    logit = float(losses.class_loss(logits, label, "bce_logit"))
+    assert abs(logit - math.log(2.0)) < 1e-6
+    with pytest.raises(ValueError, match="gan loss"):
+        losses.class_loss(logits, label, "hinge")
+
+
+def test_curve_loss_zero_when_velocity_integrates_to_curve():
+    c = jax.random.normal(jax.random.key(0), (3, 16, 3)) * 2.0
+    v = curves.velocity(c).at[:, 0].set(123.0)  # v[0] is ignored by the convention
+    assert float(losses.curve_loss(v, c, 4, 0.056444)) < 1e-6
+
+
+def test_curve_loss_hand():
+    t = jnp.arange(8.0)
+    c = jnp.stack([t, jnp.full_like(t, 5.0), -t], -1)[None]  # x = t, y ignored, z = -t
+    v = jnp.zeros_like(c)
+    # points at k·s - 1 = 3 and 7; x̂ = c[0] = 0: 0.5 (9 + 9) + 0.5 (49 + 49) = 58
+    assert abs(float(losses.curve_loss(v, c, 2)) - 58.0) < 1e-5
+    assert abs(float(losses.curve_loss(v, c, 2, unit=2.0)) - 58.0 / 4) < 1e-5
+
+
+def _chain_pose(lengths, T=5, B=2):
+    """Joints 1..J on a bent chain from the root; bone k joins k-1 and k."""
+    rng = np.random.default_rng(0)
+    dirs = rng.normal(size=(B, T, len(lengths), 3))
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    pos = np.cumsum(dirs * np.asarray(lengths)[:, None], axis=2)
+    return jnp.asarray(pos.reshape(B, T, -1), jnp.float32)
+
+
+def test_bone_loss_zero_at_target_lengths_and_hand():
+    lengths = np.array([0.1, 0.4, 0.25, 0.3])
+    pairs = [(0, 1), (1, 2), (2, 3), (3, 4)]
+    pose = _chain_pose(lengths)
+    np.testing.assert_allclose(np.asarray(losses.bone_lengths(pose, pairs)), np.broadcast_to(lengths, (2, 5, 4)),
+                               rtol=1e-5)
+    assert float(losses.bone_loss(pose, pairs, lengths, 0.056444)) < 1e-9
+    # one bone 0.1 too long everywhere: MSE over 4 bones = 0.01 / 4, in units of 0.05
+    target = lengths.copy()
+    target[2] -= 0.1
+    np.testing.assert_allclose(float(losses.bone_loss(pose, pairs, target, 0.05)), 0.01 / 4 / 0.0025, rtol=1e-4)
+
+
+def test_bone_loss_gradient_finite_at_zero_length():
+    pose = jnp.zeros((1, 2, 6))
+    g = jax.grad(lambda p: losses.bone_loss(p, [(0, 1), (1, 2)], [0.1, 0.2]))(pose)
+    assert bool(jnp.all(jnp.isfinite(g)))

@@ -1,0 +1,167 @@
+"""The training step at a tiny config: runs, learns, is pure and reproducible."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from flax import nnx
+
+from motiongan_jax import step as step_lib
+from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
+
+# Compile time dominates on CPU; the optimiser level does not change what is computed.
+FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+J, T, B, C = 27, 16, 2, 4
+METRICS = ("d_adv", "d_cls", "d_total", "g_adv", "g_cls", "g_curve", "g_bone", "g_total",
+           "d_acc_real", "d_acc_fake", "g_grad_norm", "g_param_norm", "g_update_norm",
+           "d_grad_norm", "d_param_norm", "d_update_norm")
+
+
+class Layout(NamedTuple):  # the part of representation.RowLayout that step.py reads
+    num_rows: int
+    bone_pairs: tuple
+    bone_lengths_m: np.ndarray
+
+
+LAYOUT = Layout(3 * J, tuple((max(k - 2, 0) if k % 2 else k - 1, k) for k in range(1, J + 1)),
+                np.linspace(0.05, 0.4, J).astype(np.float32))
+CFG = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=8),
+                      train=TrainConfig(batch_size=B)))
+
+
+def _batch():
+    k1, k2 = jax.random.split(jax.random.key(42))
+    t = jnp.arange(T, dtype=jnp.float32)[None, :, None]
+    heading = jnp.array([[[1.0, 0.0, 0.3]], [[0.2, 0.0, -1.0]]])
+    curve = 0.1 * t * heading
+    root = curve + jnp.array([0.0, 0.9, 0.0]) + 0.01 * jax.random.normal(k1, (B, T, 3))
+    return {"root_BxTx3": root, "pose_BxTxR": 0.3 * jax.random.normal(k2, (B, T, 3 * J)),
+            "curve_BxTx3": curve, "label_B": jnp.array([1, 3], jnp.int32)}
+
+
+def _leaves_equal(a, b) -> bool:
+    return all(bool(jnp.array_equal(x, y)) for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)))
+
+
+@pytest.fixture(scope="module")
+def setup():
+    state0 = step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0))
+    batch = _batch()
+    key = jax.random.key(7)
+    step = jax.jit(step_lib.make_train_step(CFG, LAYOUT, C)).lower(state0, batch, key).compile(
+        compiler_options=FAST)
+
+    def run(state, base_key, n=3):
+        metrics = []
+        for i in range(n):
+            state, m = step(state, batch, jax.random.fold_in(base_key, i))
+            metrics.append(m)
+        return state, metrics
+
+    state3, metrics = run(state0, key)
+    return dict(state0=state0, batch=batch, key=key, step=step, run=run, state3=state3, metrics=metrics)
+
+
+def test_three_steps_run_and_learn(setup):
+    s0, s3, metrics = setup["state0"], setup["state3"], setup["metrics"]
+    for m in metrics:
+        assert set(METRICS) <= set(m)
+        chex.assert_tree_all_finite(m)
+        for k in ("d_acc_real", "d_acc_fake", "d_cls_acc_real", "g_cls_acc_fake"):
+            assert 0.0 <= float(m[k]) <= 1.0
+        assert float(m["g_grad_norm"]) > 0 and float(m["d_grad_norm"]) > 0
+    assert int(s3.step) == 3
+    assert jax.tree_util.tree_structure(s3) == jax.tree_util.tree_structure(s0)  # no recompiles
+    for name in ("g_params", "d_params"):
+        changed = [not bool(jnp.array_equal(a, b)) for a, b in
+                   zip(jax.tree_util.tree_leaves(getattr(s0, name)), jax.tree_util.tree_leaves(getattr(s3, name)))]
+        assert all(changed), f"{name}: {changed.count(False)} tensors never updated"
+    assert int(s3.opt_g_state[0].count) == 3 and int(s3.opt_d_state[0].count) == 3
+    chex.assert_tree_all_finite((s3.g_params, s3.d_params, s3.d_sn_state))
+    # total losses are the weighted sums of their terms
+    m, t = metrics[0], CFG.train
+    np.testing.assert_allclose(float(m["g_total"]), float(t.w_g_adv * m["g_adv"] + t.w_g_cls * m["g_cls"]
+                               + t.w_g_curve * m["g_curve"] + t.w_g_bone * m["g_bone"]), rtol=1e-5)
+    np.testing.assert_allclose(float(m["d_total"]), float(t.w_d_adv * m["d_adv"] + t.w_d_cls * m["d_cls"]), rtol=1e-5)
+
+
+def test_spectral_norm_vectors_advance(setup):
+    s0 = setup["state0"]
+    s1, _ = setup["step"](s0, setup["batch"], setup["key"])
+    u0 = s0.d_sn_state["c3_0"]["sn"]["u"][...]
+    u1 = s1.d_sn_state["c3_0"]["sn"]["u"][...]
+    assert not bool(jnp.array_equal(u0, u1))
+    np.testing.assert_allclose(float(jnp.linalg.norm(u1)), 1.0, rtol=1e-5)
+
+
+def test_same_key_is_bit_identical_and_pure(setup):
+    s0 = setup["state0"]
+    snapshot = jax.tree_util.tree_map(np.array, s0)
+    again, metrics = setup["run"](s0, setup["key"])
+    assert _leaves_equal(again, setup["state3"])
+    assert _leaves_equal(metrics, setup["metrics"])
+    assert _leaves_equal(s0, snapshot)  # the input state is never mutated
+    other, _ = setup["run"](s0, jax.random.key(8), n=1)
+    once, _ = setup["run"](s0, setup["key"], n=1)
+    assert not _leaves_equal(other.g_params, once.g_params)
+
+
+def test_init_is_reproducible(setup):
+    same = step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0))
+    assert _leaves_equal(same, setup["state0"])
+    other = step_lib.init_state(CFG, LAYOUT, C, jax.random.key(1))
+    assert not _leaves_equal(other.g_params, setup["state0"].g_params)
+    assert not _leaves_equal(other.d_sn_state, setup["state0"].d_sn_state)
+
+
+def test_d_loss_does_not_reach_the_fake(setup):
+    s0, batch = setup["state0"], setup["batch"]
+    fake_vel = jax.random.normal(jax.random.key(3), (B, T, 3))
+    fake_pose = jax.random.normal(jax.random.key(4), (B, T, 3 * J))
+
+    def d_total(d_params, fake_vel, fake_pose):
+        d = nnx.merge(s0.d_def, d_params, s0.d_sn_state, copy=True)
+        return step_lib.d_losses(d, fake_vel, fake_pose, batch["root_BxTx3"], batch["pose_BxTxR"],
+                                 batch["label_B"], CFG.train)["d_total"]
+
+    g_d, g_vel, g_pose = jax.jit(jax.grad(d_total, argnums=(0, 1, 2))).lower(
+        s0.d_params, fake_vel, fake_pose).compile(compiler_options=FAST)(s0.d_params, fake_vel, fake_pose)
+    np.testing.assert_array_equal(np.asarray(g_vel), 0.0)
+    np.testing.assert_array_equal(np.asarray(g_pose), 0.0)
+    assert float(sum(jnp.abs(x).sum() for x in jax.tree_util.tree_leaves(g_d))) > 0
+
+
+def test_generator_apply_paths_agree(setup):
+    s3 = setup["state3"]
+    vel = jax.random.normal(jax.random.key(5), (B, T, 3))
+    labels = jnp.array([0, 2], jnp.int32)
+
+    def both(state, vel, labels):
+        w = step_lib.latent_w(state, labels)  # z = 0
+        by_w = step_lib.generator_apply(state, vel, w_BxW=w)
+        by_label = step_lib.make_generate(CFG, LAYOUT, C)(state, vel, labels)
+        return w, by_w, by_label
+
+    w, by_w, by_label = jax.jit(both).lower(s3, vel, labels).compile(compiler_options=FAST)(s3, vel, labels)
+    chex.assert_shape(w, (B, CFG.model.w_dim))
+    chex.assert_shape(by_w[0], (B, T, 3))
+    chex.assert_shape(by_w[1], (B, T, 3 * J))
+    assert _leaves_equal(by_w, by_label)
+
+
+def test_fake_labels_and_z():
+    labels, z = step_lib.sample_labels_and_z(CFG, C, 64, jax.random.key(0))
+    assert labels.dtype == jnp.int32 and int(labels.min()) >= 0 and int(labels.max()) < C
+    assert len(set(np.asarray(labels).tolist())) == C
+    assert float(jnp.std(z)) > 0.5
+    zeros_cfg = dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, use_z="zeros"))
+    _, z0 = step_lib.sample_labels_and_z(zeros_cfg, C, 4, jax.random.key(0))
+    np.testing.assert_array_equal(np.asarray(z0), 0.0)
+    chex.assert_shape(z0, (4, CFG.model.z_dim))
