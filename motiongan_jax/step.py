@@ -14,6 +14,7 @@ pure function that merges them inside, so the caller can `jax.jit(..., donate_ar
 D runs three times (fake for D, real for D, fake for G, in that order) with `update_stats=True`,
 so its spectral-norm vectors advance three power iterations per step, as in the reference.
 No PRNG key lives in the state: the caller passes `fold_in(base_key, step)`.
+Velocities (G's input and the real root velocity) come from `curves.velocity`.
 
 `layout` is anything with `num_rows`, `bone_pairs` and `bone_lengths_m` (representation.RowLayout).
 """
@@ -60,6 +61,14 @@ def _build_g(model_cfg, num_joints: int, num_styles: int, key) -> Generator:
 def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key) -> Discriminator:
     return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
                          kw=model_cfg.kw, rngs=nnx.Rngs(key))
+
+
+def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array) -> tuple[Generator, Discriminator]:
+    """(G, D) as NNX modules from a full Config, initialised like `init_state` with this key (equal
+    up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only."""
+    k_g, k_d = jax.random.split(key)
+    return (_build_g(cfg.model, num_joints, num_styles, k_g),
+            _build_d(cfg.model, cfg.data.window_T, num_joints, num_styles, k_d))
 
 
 def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransformation]:
@@ -200,6 +209,15 @@ def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Arra
 # The step
 
 
+def check_batch(batch: dict, num_rows: int) -> None:
+    """Shapes must agree (B x T x 3, B x T x R, B); checked at trace time, costs nothing after."""
+    b, t, _ = batch["curve_BxTx3"].shape
+    want = {"root_BxTx3": (b, t, 3), "pose_BxTxR": (b, t, num_rows), "curve_BxTx3": (b, t, 3), "label_B": (b,)}
+    bad = {k: batch[k].shape for k, shape in want.items() if batch[k].shape != shape}
+    if bad:
+        raise ValueError(f"batch shapes disagree: {bad}; expected {want}")
+
+
 def make_train_step(cfg, layout, num_styles: int) -> Callable:
     """`train_step(state, batch, key) -> (state, metrics)`, pure; jit it with donate_argnums=0.
 
@@ -217,7 +235,10 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         raise ValueError(f"{len(bone_pairs)} bone pairs but bone_lengths_m has shape {bone_lengths.shape}")
     tx_g, tx_d = optimizers(cfg)
 
+    num_rows = int(layout.num_rows)
+
     def train_step(state: TrainState, batch: dict, key: jax.Array) -> tuple[TrainState, dict]:
+        check_batch(batch, num_rows)
         curve = batch["curve_BxTx3"]
         fake_labels, z = sample_labels_and_z(cfg, num_styles, curve.shape[0], key)
         curve_vel = curves.velocity(curve)

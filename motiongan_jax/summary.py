@@ -3,15 +3,11 @@
 from __future__ import annotations
 
 import jax
-import numpy as np
 from flax import nnx
 
 from motiongan_jax import data, step as step_lib
+from motiongan_jax.nn import count_params
 from motiongan_jax.config import Config
-
-
-def count_params(module) -> int:
-    return int(sum(np.prod(x.shape) for x in jax.tree.leaves(nnx.state(module, nnx.Param))))
 
 
 def describe(cfg: Config) -> str:

@@ -121,6 +121,15 @@ def test_init_is_reproducible(setup):
     assert not _leaves_equal(other.d_sn_state, setup["state0"].d_sn_state)
 
 
+def test_abstract_init_matches(setup):
+    # checkpoint restore builds its target with jax.eval_shape(init_state)
+    like = jax.eval_shape(lambda: step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0)))
+    assert jax.tree_util.tree_structure(like) == jax.tree_util.tree_structure(setup["state0"])
+    g, d = nnx.eval_shape(lambda: step_lib.build_models(CFG, J, C, jax.random.key(0)))
+    n_g = sum(x.size for x in jax.tree_util.tree_leaves(setup["state0"].g_params))
+    assert sum(x.size for x in jax.tree_util.tree_leaves(nnx.state(g, nnx.Param))) == n_g
+
+
 def test_d_loss_does_not_reach_the_fake(setup):
     s0, batch = setup["state0"], setup["batch"]
     fake_vel = jax.random.normal(jax.random.key(3), (B, T, 3))

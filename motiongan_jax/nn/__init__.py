@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import functools
-from typing import Callable, NamedTuple
+from typing import Callable
 
 import jax
 from flax import nnx
@@ -14,20 +14,6 @@ from motiongan_jax.nn.latent import LatentTransform
 from motiongan_jax.nn.layers import SpectralNormState
 
 
-class Models(NamedTuple):
-    generator: Generator
-    discriminator: Discriminator
-
-
-def build_models(model_cfg, num_joints: int, num_styles: int, seq_len: int, rngs: nnx.Rngs) -> Models:
-    """G and D from a `config.ModelConfig`; D is built for windows of `seq_len` samples."""
-    g = Generator(num_joints, top=model_cfg.top, kw=model_cfg.kw, w_dim=model_cfg.w_dim,
-                  z_dim=model_cfg.z_dim, num_styles=num_styles, rngs=rngs)
-    d = Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
-                      kw=model_cfg.kw, rngs=rngs)
-    return Models(g, d)
-
-
 def count_params(module: nnx.Module) -> int:
     """Trainable parameters (nnx.Param); spectral-norm u/v are state, not counted."""
     return sum(int(x.size) for x in jax.tree_util.tree_leaves(nnx.state(module, nnx.Param)))
@@ -35,7 +21,8 @@ def count_params(module: nnx.Module) -> int:
 
 # Initialisation is ~100 separate threefry draws, and XLA's CPU backend spends most of a minute
 # optimising them (each draw is unrolled code). The init runs once, so it is compiled with the
-# backend optimiser off: 4-5x faster to compile, same random bits (threefry is integer code).
+# backend optimiser off: 4-5x faster to compile, same random bits (threefry is integer code;
+# the float maps to normal/uniform may differ from an eager init in the last place).
 _FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
 
@@ -55,12 +42,15 @@ def init_split(build: Callable[..., nnx.Module], build_args: tuple, key: jax.Arr
     """`nnx.split(build(*build_args, key), *filters)`, the arrays made by one cached jit that is
     compiled fast. `build` and `build_args` must be hashable (a module-level function and
     e.g. ints and frozen configs), so that repeated inits reuse the compiled function.
-    Returns (graphdef, state for filter 0, state for filter 1, ...).
+    Returns (graphdef, state for filter 0, state for filter 1, ...). Under a trace (e.g.
+    jax.eval_shape of an init) it simply traces `build`.
     """
+    if isinstance(key, jax.core.Tracer):  # inside jit / eval_shape: just trace it
+        return nnx.split(build(*build_args, key), *filters)
     graphdef = nnx.split(nnx.eval_shape(lambda: build(*build_args, key)), *filters)[0]
     key_aval = jax.ShapeDtypeStruct(key.shape, key.dtype)
     return (graphdef, *_compiled_init(build, tuple(build_args), tuple(filters), key_aval)(key))
 
 
-__all__ = ["Discriminator", "Generator", "LatentTransform", "Models", "SpectralNormState",
-           "build_models", "count_params", "init_split"]
+__all__ = ["Discriminator", "Generator", "LatentTransform", "SpectralNormState",
+           "count_params", "init_split"]

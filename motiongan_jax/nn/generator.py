@@ -119,7 +119,7 @@ class Generator(nnx.Module):
         return {name: getattr(self, name).adain.style(w_BxW) for name in self.BLOCKS}
 
     def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array) -> tuple[jax.Array, jax.Array]:
-        b, t, _ = curve_vel_BxTx3.shape
+        t = curve_vel_BxTx3.shape[1]
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
         w = w_BxW
