@@ -389,6 +389,17 @@ def resample_polyline(points_Px2, num_points: int | None = None, spacing: float 
     return np.asarray(_eval_spline_jit(spline, x[None], interval=interval)[0], dtype=np.float64)
 
 
+def curve_from_bvh(path, units_to_m: float | None = None) -> np.ndarray:
+    """The floor path (metres) of a BVH file's root (the representation root: the pelvis).
+    Units default to a guess from the skeleton's leg length (CMU units, cm, inches or m)."""
+    from motiongan_jax import bvh, kinematics, representation
+
+    motion = bvh.read_bvh(path)
+    units = representation.guess_units_to_m(motion.skeleton) if units_to_m is None else units_to_m
+    root = representation.representation_root(motion.skeleton)
+    return curve_from_root_positions(kinematics.world_positions(motion)[:, root] * units)
+
+
 def curve_from_root_positions(root_Fx3) -> np.ndarray:
     """A user curve from another motion's root positions (F, 3): its floor path, validated."""
     root = np.asarray(root_Fx3, dtype=np.float64)

@@ -13,14 +13,13 @@ import json
 import os
 import re
 import sys
-import tempfile
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax import bvh, curves, kinematics
+from motiongan_jax import atomic, bvh, curves, kinematics
 from motiongan_jax.config import DataConfig
 from motiongan_jax.representation import UNITS_TO_M, RowLayout, layout_from_skeleton, to_rows
 
@@ -126,18 +125,7 @@ def write_file_lists(out_dir: str | Path, train, val, root: str | Path | None = 
     out_dir.mkdir(parents=True, exist_ok=True)
     for name, entries in (("train_files.txt", train), ("val_files.txt", val)):
         lines = [str(Path(p).relative_to(root)) if root else str(p) for p, _ in entries]
-        atomic_write_text(out_dir / name, "".join(line + "\n" for line in lines))
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        atomic.write_text(out_dir / name, "".join(line + "\n" for line in lines))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -194,16 +182,10 @@ def preprocess_clip(path: Path, label: FileLabel, units_to_m: float, start_offse
     if use_cache:
         cache_file.parent.mkdir(parents=True, exist_ok=True)
         sk = motion.skeleton
-        fd, tmp = tempfile.mkstemp(dir=cache_file.parent, suffix=".npz.tmp")
-        os.close(fd)
-        try:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, root=root, pose=pose, fps=motion.fps, names=np.array(sk.names),
-                         parents=np.array(sk.parents), offsets=sk.offsets,
-                         channels=np.array(json.dumps([list(c) for c in sk.channels])))
-            os.replace(tmp, cache_file)
-        finally:
-            Path(tmp).unlink(missing_ok=True)
+        with atomic.atomic_path(cache_file) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, root=root, pose=pose, fps=motion.fps, names=np.array(sk.names),
+                     parents=np.array(sk.parents), offsets=sk.offsets,
+                     channels=np.array(json.dumps([list(c) for c in sk.channels])))
     return Clip(str(path), label, motion.fps, root, pose, layout)
 
 

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from motiongan_jax import bvh, kinematics
+from motiongan_jax import atomic, bvh, kinematics
 from motiongan_jax.data import DataError, label_from_filename
 from motiongan_jax.representation import UNITS_TO_M
 
@@ -59,12 +57,7 @@ def export_positions(data_dir: str | Path, out: str | Path, labels: str = "paper
         source_files=np.array(sources),
     )
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, out)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    with atomic.atomic_path(out) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **arrays)
     return {"clips": len(motions), "frames": int(offset), "joints": len(first.names),
             "styles": style_names, "skipped": len(errors)}

@@ -27,6 +27,10 @@ UNITS_TO_M = {"cmu": 0.056444, "paper": 0.056444, "synthetic": 0.056444, "bandai
 
 _ZERO_LENGTH_SQ = 1e-8
 
+# Units a BVH file is likely to be in, for files whose source is not known (a curve from a BVH):
+# chosen by which makes the leg about 0.9 m long.
+_COMMON_UNITS = {"CMU units": 0.056444, "centimetres": 0.01, "inches": 0.0254, "metres": 1.0}
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RowLayout:
@@ -52,6 +56,19 @@ class RowLayout:
     def signature(self) -> tuple:
         """What must match between a dataset and a checkpoint (lengths may differ slightly)."""
         return (self.joint_names, self.parents)
+
+
+def guess_units_to_m(skeleton: Skeleton) -> float:
+    """Metres per file unit, guessed from the rest-pose height of the skeleton's lowest point
+    below the representation root (a leg, ~0.9 m for an adult)."""
+    world_y = np.zeros(skeleton.num_joints)
+    for j, p in enumerate(skeleton.parents):
+        world_y[j] = (world_y[p] if p >= 0 else 0.0) + skeleton.offsets[j, 1]
+    root = representation_root(skeleton)
+    leg = world_y[root] - world_y.min()
+    if leg <= 0:
+        raise ValueError("cannot guess the units of a skeleton with nothing below its root")
+    return min(_COMMON_UNITS.values(), key=lambda u: abs(np.log(leg * u / 0.9)))
 
 
 def layout_from_parents(joint_names, parents, bone_lengths_m) -> RowLayout:

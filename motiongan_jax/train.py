@@ -7,10 +7,8 @@ from its latest checkpoint therefore repeats exactly what an unbroken run does.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -19,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax import checkpoint, curves, data, step as step_lib
+from motiongan_jax import atomic, checkpoint, curves, data, step as step_lib
 from motiongan_jax.config import Config, config_hash, to_dict
 from motiongan_jax.representation import from_rows
 
@@ -64,7 +62,7 @@ def _truncate_metrics(path: Path, last_step: int) -> None:
     if not path.exists():
         return
     keep = [line for line in path.read_text().splitlines() if line.strip() and json.loads(line)["step"] <= last_step]
-    data.atomic_write_text(path, "".join(line + "\n" for line in keep))
+    atomic.write_text(path, "".join(line + "\n" for line in keep))
 
 
 class Progress:
@@ -119,7 +117,7 @@ def write_preview(path: Path, state, generate_fn, meta: dict, curve_Tx3: np.ndar
     root = curves.integrate(start, root_vel)
     # the generator predicts no absolute height: lift the root to the data's bone-derived hip height
     layout = RowLayout(tuple(meta["joint_names"]), tuple(meta["parents"]), (), (), np.asarray(meta["bone_lengths_m"]))
-    joints = np.asarray(from_rows(root, pose, layout))
+    joints = np.array(from_rows(root, pose, layout))
     joints[..., 1] -= joints[..., 1].min(axis=(1, 2), keepdims=True)
     return viz.animate_skeletons(list(joints), meta["parents"], [styles[i] for i in labels], path,
                                  curves=[curve_Tx3] * len(labels))
@@ -136,7 +134,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     dataset = data.load_dataset(cfg.data, log=log)
     data.write_file_lists(workdir, [(c.source, c.label) for c in dataset.train], [(c.source, c.label) for c in dataset.val])
     meta = run_meta(cfg, dataset)
-    data.atomic_write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
+    atomic.write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
 
     arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
     sample_batch = jax.jit(data.make_sample_batch(cfg.data, cfg.train.batch_size))

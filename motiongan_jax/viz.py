@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from motiongan_jax import atomic
 
 
 def _pyplot():
@@ -65,16 +65,13 @@ def animate_skeletons(joints_list, parents, titles, path, *, fps: float = 15.0, 
             trail.set_3d_properties(np.zeros(len(root)))
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
     try:
-        writer = PillowWriter(fps=fps)
-        with writer.saving(fig, tmp, dpi=60):
-            for t in range(T):
-                draw(t)
-                writer.grab_frame()
-        os.replace(tmp, path)
+        with atomic.atomic_path(path) as tmp:
+            writer = PillowWriter(fps=fps)
+            with writer.saving(fig, str(tmp), dpi=60):
+                for t in range(T):
+                    draw(t)
+                    writer.grab_frame()
     finally:
-        Path(tmp).unlink(missing_ok=True)
         plt.close(fig)
     return path

@@ -83,3 +83,25 @@ def test_hand_built_skeleton():
     assert layout.parents == (-1, 0, 1, 0)
     assert layout.bone_pairs == ((0, 1), (1, 2), (0, 3))
     np.testing.assert_allclose(layout.bone_lengths_m, [1.0, 1.5, 2.0])
+
+
+def test_units_are_guessed_from_the_leg(cmu, bandai):
+    from motiongan_jax import synthetic
+    from motiongan_jax.representation import guess_units_to_m
+
+    assert guess_units_to_m(cmu.skeleton) == CMU_UNIT
+    assert guess_units_to_m(synthetic.cmu_skeleton()) == CMU_UNIT
+    assert guess_units_to_m(bandai.skeleton) == 0.01
+    metres = bvh.Skeleton(bandai.skeleton.names, bandai.skeleton.parents, bandai.skeleton.offsets * 0.01,
+                          bandai.skeleton.channels)
+    assert guess_units_to_m(metres) == 1.0
+
+
+def test_curve_from_bvh_is_the_root_floor_path(shared_data):
+    from motiongan_jax import curves
+
+    path = shared_data / "bandai" / "dataset-2" / "dataset-2_walk_normal_001.bvh"
+    motion = bvh.read_bvh(path)
+    hips = motion.skeleton.names.index("Hips")
+    expected = kinematics.world_positions(motion)[:, hips][:, [0, 2]] * 0.01
+    np.testing.assert_allclose(curves.curve_from_bvh(path), expected, atol=1e-9)

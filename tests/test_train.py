@@ -161,3 +161,14 @@ def test_dry_run_prints_parameter_counts(repo):
                           "--workdir", "unused", "--dry-run"], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "generator" in res.stdout.lower() and "discriminator" in res.stdout.lower()
+
+
+def test_short_training_lowers_the_curve_loss(tiny, tmp_path):
+    # G's learning rate is raised (2e-4 -> 1e-3) so that 100 tiny steps show the trend clearly
+    cfg = override(tiny, ["train.num_steps=100", "train.checkpoint_every=100", "train.batch_size=8",
+                          "train.lr_g=1e-3"])
+    train_lib.train(cfg, tmp_path, progress=False, log=lambda s: None)
+    curve = [json.loads(x)["g_curve"] for x in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    assert len(curve) == 100
+    first, last = np.mean(curve[:10]), np.mean(curve[-20:])
+    assert last < 0.6 * first, (first, last)
