@@ -9,6 +9,7 @@ import re
 import numpy as np
 import pytest
 
+from expected import CMU_NAMES
 from motiongan_jax import bvh
 from motiongan_jax.bvh import BVHError, parse_bvh, read_bvh, read_bvh_dir, write_bvh
 
@@ -145,16 +146,6 @@ def test_two_end_sites_under_one_joint_get_distinct_names():
 # Real files
 # ---------------------------------------------------------------------------------------------
 
-# Spec §2.2: depth-first joint order of CMU_standard.bvh (the spec renames the root "Root").
-CMU_NAMES = (
-    "Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite",
-    "RHipJoint", "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite",
-    "LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head", "Head_EndSite",
-    "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftFingerBase", "LeftHandIndex1",
-    "LeftHandIndex1_EndSite", "LThumb", "LThumb_EndSite",
-    "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightFingerBase", "RightHandIndex1",
-    "RightHandIndex1_EndSite", "RThumb", "RThumb_EndSite",
-)
 CMU_PARENT_NAMES = {
     "LHipJoint": "Hips", "LeftUpLeg": "LHipJoint", "LeftToeBase_EndSite": "LeftToeBase",
     "LowerBack": "Hips", "Spine1": "Spine", "Neck": "Spine1", "Head_EndSite": "Head",

@@ -12,7 +12,7 @@ def test_embedded_data_configs_load(name):
     assert load_config(CONFIGS / f"{name}.py").name == name
 
 
-@pytest.mark.parametrize("name", ["paper", "bandai"])
+@pytest.mark.parametrize("name", ["paper", "bandai", "bandai_cpu"])
 def test_real_data_configs_need_a_data_dir(name):
     with pytest.raises(ConfigError, match=r"data\.data_dir"):
         load_config(CONFIGS / f"{name}.py")

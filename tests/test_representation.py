@@ -1,28 +1,13 @@
 import numpy as np
 import pytest
 
+from expected import PAPER_BONES, PAPER_JOINTS
 from motiongan_jax import bvh, kinematics
 from motiongan_jax.representation import (bone_lengths, from_rows, layout_from_skeleton,
                                           representation_root, to_rows)
 
 CMU_UNIT = 0.056444
 
-# Spec §2.3: the paper's 28 kept joints, in order.
-PAPER_JOINTS = (
-    "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite",
-    "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite",
-    "Spine", "Spine1", "Neck1", "Head", "Head_EndSite",
-    "LeftArm", "LeftForeArm", "LeftHand", "LeftHandIndex1", "LeftHandIndex1_EndSite", "LThumb_EndSite",
-    "RightArm", "RightForeArm", "RightHand", "RightHandIndex1", "RightHandIndex1_EndSite", "RThumb_EndSite",
-)
-# Spec §2.3: the 27 bone pairs of the bone loss.
-PAPER_BONES = {
-    (0, 11), (11, 12), (12, 22), (22, 23), (23, 24), (24, 27), (24, 25), (25, 26),
-    (12, 16), (16, 17), (17, 18), (18, 21), (18, 19), (19, 20),
-    (12, 13), (13, 14), (14, 15),
-    (0, 6), (6, 7), (7, 8), (8, 9), (9, 10),
-    (0, 1), (1, 2), (2, 3), (3, 4), (4, 5),
-}
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pytest
 
+from expected import CMU_NAMES
 from motiongan_jax import bvh, kinematics, synthetic
 from motiongan_jax.representation import layout_from_skeleton
 
@@ -18,15 +19,6 @@ FPS = 60.0
 SECONDS = 10.0
 IDX = {n: i for i, n in enumerate(synthetic.JOINT_NAMES)}
 
-CMU_ORDER = (
-    "Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite",
-    "RHipJoint", "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite",
-    "LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head", "Head_EndSite",
-    "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "LeftFingerBase", "LeftHandIndex1",
-    "LeftHandIndex1_EndSite", "LThumb", "LThumb_EndSite",
-    "RightShoulder", "RightArm", "RightForeArm", "RightHand", "RightFingerBase", "RightHandIndex1",
-    "RightHandIndex1_EndSite", "RThumb", "RThumb_EndSite",
-)
 ZERO_LENGTH = {"LHipJoint", "RHipJoint", "LowerBack", "Neck", "LeftShoulder", "LeftFingerBase",
                "LThumb", "RightShoulder", "RightFingerBase", "RThumb"}
 # The paper's 28 kept joints (spec §2.3), with the file root's own name.
@@ -117,7 +109,7 @@ def walks():
 
 def test_skeleton_topology_names_channels():
     sk = synthetic.cmu_skeleton()
-    assert sk.names == CMU_ORDER
+    assert sk.names == CMU_NAMES
     assert sk.num_joints == 38
     assert sum(not e for e in sk.is_end_site) == 31
     assert sum(sk.is_end_site) == 7
