@@ -74,7 +74,8 @@ def load_run(workdir: str | Path, step: int | None = None):
     mngr = manager(ckdir)
     step, meta = read_meta(mngr, step)
     cfg = from_dict(meta["config"])
-    layout = layout_from_parents(meta["joint_names"], meta["parents"], meta["bone_lengths_m"])
+    layout = layout_from_parents(meta["joint_names"], meta["parents"], meta["bone_lengths_m"],
+                                 meta.get("rest_offsets_m"))
     like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
     state = restore(mngr, step, like)
     return state, meta, cfg, layout

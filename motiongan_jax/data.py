@@ -230,7 +230,8 @@ def _check_layouts(clips: list[Clip]) -> RowLayout:
     # Bone targets come from the skeletons' offsets (not from one augmented sample, as the
     # reference did); with several subjects, their mean.
     lengths = np.mean([c.layout.bone_lengths_m for c in clips], axis=0)
-    return dataclasses.replace(first.layout, bone_lengths_m=lengths)
+    rest = np.mean([c.layout.rest_offsets_m for c in clips], axis=0)
+    return dataclasses.replace(first.layout, bone_lengths_m=lengths, rest_offsets_m=rest)
 
 
 def resolve_data_dir(cfg: DataConfig) -> Path:

@@ -39,6 +39,9 @@ class RowLayout:
     source_index: tuple[int, ...]  # kept joint -> index in the skeleton (End Sites included)
     bone_pairs: tuple[tuple[int, int], ...]  # (parent, child) in kept indices, one per non-root joint
     bone_lengths_m: np.ndarray  # (J - 1,) metres, in the order of bone_pairs
+    # (J, 3) metres: each kept joint's rest-pose offset from its kept parent (row 0: zeros);
+    # the skeleton a generated motion is exported on. None when unknown.
+    rest_offsets_m: np.ndarray | None = None
 
     @property
     def num_joints(self) -> int:
@@ -71,7 +74,7 @@ def guess_units_to_m(skeleton: Skeleton) -> float:
     return min(_COMMON_UNITS.values(), key=lambda u: abs(np.log(leg * u / 0.9)))
 
 
-def layout_from_parents(joint_names, parents, bone_lengths_m) -> RowLayout:
+def layout_from_parents(joint_names, parents, bone_lengths_m, rest_offsets_m=None) -> RowLayout:
     """A layout rebuilt from what a checkpoint stores (no skeleton needed)."""
     parents = tuple(int(p) for p in parents)
     return RowLayout(
@@ -80,6 +83,7 @@ def layout_from_parents(joint_names, parents, bone_lengths_m) -> RowLayout:
         source_index=tuple(range(len(parents))),
         bone_pairs=tuple((parents[k], k) for k in range(1, len(parents))),
         bone_lengths_m=np.asarray(bone_lengths_m, np.float64),
+        rest_offsets_m=None if rest_offsets_m is None else np.asarray(rest_offsets_m, np.float64),
     )
 
 
@@ -117,12 +121,17 @@ def layout_from_skeleton(skeleton: Skeleton, units_to_m: float) -> RowLayout:
     parents = tuple(-1 if kept_parent[src] < 0 else position[kept_parent[src]] for src in kept)
     pairs = tuple((parents[k], k) for k in range(1, len(kept)))
     lengths = np.array([np.linalg.norm(skeleton.offsets[kept[k]]) * units_to_m for k in range(1, len(kept))])
+    rest = np.zeros((len(kept), 3))
+    for k in range(1, len(kept)):
+        # skipped joints between a kept joint and its kept parent have zero offsets
+        rest[k] = skeleton.offsets[kept[k]] * units_to_m
     return RowLayout(
         joint_names=tuple(skeleton.names[s] for s in kept),
         parents=parents,
         source_index=tuple(kept),
         bone_pairs=pairs,
         bone_lengths_m=lengths,
+        rest_offsets_m=rest,
     )
 
 

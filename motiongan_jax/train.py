@@ -39,6 +39,7 @@ def run_meta(cfg: Config, dataset: data.Dataset) -> dict:
         "joint_names": list(dataset.layout.joint_names),
         "parents": list(dataset.layout.parents),
         "bone_lengths_m": [float(x) for x in dataset.layout.bone_lengths_m],
+        "rest_offsets_m": np.asarray(dataset.layout.rest_offsets_m).tolist(),
         "fps": dataset.fps,
         "model": to_dict(cfg)["model"],
         "window_T": cfg.data.window_T,

@@ -90,3 +90,17 @@ def test_curve_from_bvh_is_the_root_floor_path(shared_data):
     hips = motion.skeleton.names.index("Hips")
     expected = kinematics.world_positions(motion)[:, hips][:, [0, 2]] * 0.01
     np.testing.assert_allclose(curves.curve_from_bvh(path), expected, atol=1e-9)
+
+
+def test_rest_offsets_rebuild_the_rest_pose(cmu):
+    layout = layout_from_skeleton(cmu.skeleton, CMU_UNIT)
+    np.testing.assert_allclose(np.linalg.norm(layout.rest_offsets_m[1:], axis=-1), layout.bone_lengths_m)
+    # summing rest offsets along kept parents gives the rest pose of the full skeleton's kept joints
+    rest = np.zeros((layout.num_joints, 3))
+    for k, p in enumerate(layout.parents):
+        if p >= 0:
+            rest[k] = rest[p] + layout.rest_offsets_m[k]
+    full = np.zeros((cmu.skeleton.num_joints, 3))
+    for j, p in enumerate(cmu.skeleton.parents):
+        full[j] = (full[p] if p >= 0 else 0) + cmu.skeleton.offsets[j] * CMU_UNIT
+    np.testing.assert_allclose(rest, full[list(layout.source_index)] - full[layout.source_index[0]], atol=1e-12)
