@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax import atomic, checkpoint, curves, data, step as step_lib
+from motiongan_jax import atomic, checkpoint, curves, data, parallel, step as step_lib
 from motiongan_jax.config import Config, config_hash, to_dict
 from motiongan_jax.representation import from_rows
 
@@ -100,7 +100,7 @@ def _hms(seconds: float) -> str:
 
 def preview_curve(T: int, spacing_m: float) -> np.ndarray:
     """The fixed preview curve: an S-curve with the training data's mean spacing per sample."""
-    pts = curves.shape_curve("s_curve", length=spacing_m * (T - 1) * 1.5, num_points=200)
+    pts = curves.shape_curve("s_curve", length=spacing_m * (T - 1), num_points=200)
     xz = curves.resample_polyline(pts, num_points=T)
     return np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], -1).astype(np.float32)
 
@@ -138,10 +138,19 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     atomic.write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
 
     arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
-    sample_batch = jax.jit(data.make_sample_batch(cfg.data, cfg.train.batch_size))
     k_init, k_data, k_step = keys(cfg.train.seed)
     state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
-    train_step = jax.jit(step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles), donate_argnums=0)
+    step_fn = step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles)
+    sample_fn = data.make_sample_batch(cfg.data, cfg.train.batch_size)
+    if jax.device_count() > 1:  # data parallel: batch split over devices, state replicated
+        mesh = parallel.data_mesh()
+        train_step = parallel.shard_step(step_fn, mesh, cfg.train.batch_size)
+        sample_batch = jax.jit(sample_fn, out_shardings=parallel.batch_sharded(mesh))
+        state = parallel.put_state(state, mesh)
+        log(f"data parallel over {jax.device_count()} devices")
+    else:
+        train_step = jax.jit(step_fn, donate_argnums=0)
+        sample_batch = jax.jit(sample_fn)
     generate_fn = jax.jit(step_lib.make_generate(cfg, dataset.layout, dataset.num_styles))
 
     mngr = checkpoint.manager(workdir / "checkpoints", keep=cfg.train.keep_checkpoints)
@@ -150,6 +159,8 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
         ck_step, ck_meta = checkpoint.read_meta(mngr)
         checkpoint.check_compatible(ck_meta, meta, str(workdir / "checkpoints"))
         state = checkpoint.restore(mngr, ck_step, state)
+        if jax.device_count() > 1:
+            state = parallel.put_state(state, mesh)
         start = ck_step
         log(f"resumed from checkpoint at step {start} in {workdir / 'checkpoints'}")
     _truncate_metrics(workdir / "metrics.jsonl", start)

@@ -75,3 +75,233 @@ def animate_skeletons(joints_list, parents, titles, path, *, fps: float = 15.0, 
     finally:
         plt.close(fig)
     return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Generation outputs (bin/generate.py): animations with a chase camera, stroboscopic PNG strips
+# ---------------------------------------------------------------------------------------------
+
+def _bones(parents):
+    return [(int(p), c) for c, p in enumerate(parents) if p >= 0]
+
+
+def video_writer(path, fps: float):
+    """A matplotlib writer for `path`'s suffix: .gif (Pillow) or .mp4 (ffmpeg: the one on PATH,
+    else imageio-ffmpeg's if that is installed). RuntimeError naming the fix when there is none."""
+    import shutil
+
+    from matplotlib import rcParams
+    from matplotlib.animation import FFMpegWriter, PillowWriter
+
+    suffix = Path(path).suffix.lower()
+    if suffix == ".gif":
+        return PillowWriter(fps=fps)
+    if suffix == ".mp4":
+        exe = shutil.which("ffmpeg")
+        if exe is None:
+            try:
+                import imageio_ffmpeg
+
+                exe = imageio_ffmpeg.get_ffmpeg_exe()
+            except Exception:  # not installed, or its binary is missing
+                exe = None
+        if exe is None:
+            raise RuntimeError(f"{path}: writing .mp4 needs ffmpeg: install it (e.g. apt-get install "
+                               "ffmpeg) or `pip install imageio-ffmpeg`, or write a .gif instead")
+        rcParams["animation.ffmpeg_path"] = exe
+        return FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
+    raise ValueError(f"{path}: unsupported animation format {suffix!r} (use .gif or .mp4)")
+
+
+def _in_view(points, cx, cz, half):
+    """Floor points outside the camera's box set to NaN (3-D axes do not clip lines)."""
+    pts = np.array(points, np.float64)
+    pts[(np.abs(pts[:, 0] - cx) > half) | (np.abs(pts[:, 2] - cz) > half)] = np.nan
+    return pts
+
+
+def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, curves=None,
+                    size: float = 3.0, dpi: int = 60, view: float = 2.5, trail: int = 32) -> Path:
+    """Side-by-side 3-D animations with a chase camera, written atomically as .gif or .mp4.
+
+    joints_list: list of (T, J, 3) arrays in metres, Y up (the floor is y = 0); parents: joint
+    parents (-1 root); curves: optional list of (P, 3) input curves (None entries allowed), drawn
+    in red for `trail` samples either side of the current one (the reference's ±32); the root's
+    floor trail of the last `trail` samples in blue. The camera looks at a `view`-metre cube
+    centred on the current root's floor position, so long paths keep the character large.
+    Artists are updated in place; the figure is closed afterwards.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    writer = video_writer(path, fps)
+    n = len(joints_list)
+    T = min(len(j) for j in joints_list)
+    bones = _bones(parents)
+    fig = plt.figure(figsize=(size * n, size))
+    panels = []
+    half = view / 2
+    for i, joints in enumerate(joints_list):
+        joints = np.asarray(joints, np.float64)
+        ax = fig.add_subplot(1, n, i + 1, projection="3d")
+        ax.set_title(titles[i], fontsize=9)
+        ax.set_zlim(0, view)
+        ax.set_xticklabels([]); ax.set_yticklabels([]); ax.set_zticklabels([])
+        ax.view_init(elev=15, azim=-60)
+        curve = None if curves is None or curves[i] is None else np.asarray(curves[i], np.float64)
+        red = ax.plot([], [], [], color="red", lw=1)[0]
+        blue = ax.plot([], [], [], color="tab:blue", lw=1)[0]
+        lines = [ax.plot([], [], [], color="0.25", lw=2)[0] for _ in bones]
+        panels.append((ax, joints, curve, red, blue, lines))
+
+    def draw(t):
+        for ax, joints, curve, red, blue, lines in panels:
+            cx, cz = joints[t, 0, 0], joints[t, 0, 2]
+            ax.set_xlim(cx - half, cx + half)
+            ax.set_ylim(cz - half, cz + half)
+            for line, (p, c) in zip(lines, bones):
+                seg = joints[t, [p, c]]
+                line.set_data(seg[:, 0], seg[:, 2])
+                line.set_3d_properties(seg[:, 1])
+            root = _in_view(joints[max(0, t - trail): t + 1, 0], cx, cz, half)
+            blue.set_data(root[:, 0], root[:, 2])
+            blue.set_3d_properties(np.zeros(len(root)))
+            if curve is not None:
+                k = min(t, len(curve) - 1)
+                seg = _in_view(curve[max(0, k - trail): k + trail + 1], cx, cz, half)
+                red.set_data(seg[:, 0], seg[:, 2])
+                red.set_3d_properties(np.zeros(len(seg)))
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic.atomic_path(path) as tmp:
+            with writer.saving(fig, str(tmp), dpi=dpi):
+                for t in range(T):
+                    draw(t)
+                    writer.grab_frame()
+    finally:
+        plt.close(fig)
+    return path
+
+
+def pose_strips(joints_list, parents, titles, path, *, curves=None, num_poses: int = 8,
+                ncols: int | None = None, size: float = 3.2, dpi: int = 100) -> Path:
+    """Stroboscopic figure (the paper's Figs. 4, 6, 7): one 3-D panel per motion, `num_poses`
+    poses evenly spaced in time drawn along the path (light to dark = early to late), the input
+    curve in red and the root's floor trail in blue; equal scale on every axis. PNG (or any
+    format matplotlib saves by suffix), written atomically.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    n = len(joints_list)
+    ncols = min(n, 5) if ncols is None else int(ncols)
+    nrows = -(-n // ncols)
+    bones = _bones(parents)
+    fig = plt.figure(figsize=(size * ncols * 1.3, size * nrows))
+    for i, joints in enumerate(joints_list):
+        joints = np.asarray(joints, np.float64)
+        T = len(joints)
+        ax = fig.add_subplot(nrows, ncols, i + 1, projection="3d")
+        ax.set_title(titles[i], fontsize=9)
+        pts = joints.reshape(-1, 3)
+        if curves is not None and curves[i] is not None:
+            c = np.asarray(curves[i], np.float64)
+            ax.plot(c[:, 0], c[:, 2], np.zeros(len(c)), color="red", lw=1)
+            pts = np.concatenate([pts, c])
+        ax.plot(joints[:, 0, 0], joints[:, 0, 2], np.zeros(T), color="tab:blue", lw=0.8)
+        times = np.unique(np.linspace(0, T - 1, max(1, min(num_poses, T))).round().astype(int))
+        for k, t in enumerate(times):
+            shade = str(0.7 - 0.7 * k / max(len(times) - 1, 1))
+            for p, c in bones:
+                seg = joints[t, [p, c]]
+                ax.plot(seg[:, 0], seg[:, 2], seg[:, 1], color=shade, lw=1.2)
+        lo, hi = pts.min(0), pts.max(0)
+        lo[1] = min(lo[1], 0.0)
+        span = np.maximum(hi - lo, 0.1)
+        ax.set_xlim(lo[0], lo[0] + span[0])
+        ax.set_ylim(lo[2], lo[2] + span[2])
+        ax.set_zlim(lo[1], lo[1] + span[1])
+        ax.set_box_aspect((span[0], span[2], span[1]))
+        ax.view_init(elev=25, azim=-70)
+        ax.set_xticklabels([]); ax.set_yticklabels([]); ax.set_zticklabels([])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic.atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format=path.suffix.lstrip(".").lower() or "png",
+                        bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Style-space figures (bin/analyze.py): PCA scatter (paper Fig. 5), centroid-distance heatmap
+# ---------------------------------------------------------------------------------------------
+
+def _save_style_figure(fig, path, dpi: int) -> Path:
+    """Write a figure atomically (PNG, or what the suffix names) and close it."""
+    plt = _pyplot()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        with atomic.atomic_path(path) as tmp:
+            fig.savefig(str(tmp), dpi=dpi, format=path.suffix.lstrip(".") or "png", bbox_inches="tight")
+    finally:
+        plt.close(fig)
+    return path
+
+
+def plot_style_pca(points_Nx2, labels_N, style_names, path, *, centroids_Cx2=None, zero_Cx2=None,
+                   explained=None, marks=None, title: str = "Style codes w (PCA)",
+                   dpi: int = 120) -> Path:
+    """2-D PCA scatter of style codes coloured by style (hsv(c/C), as the reference), each style's
+    name at its centroid. zero_Cx2: the z = 0 codes (crosses); explained: the two components'
+    explained variance ratios for the axis labels; marks: {label: (x, y)} extra starred points
+    (e.g. a style-search result)."""
+    plt = _pyplot()
+    pts = np.asarray(points_Nx2, np.float64)
+    labels = np.asarray(labels_N)
+    C = len(style_names)
+    cmap = plt.get_cmap("hsv")
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    for c, name in enumerate(style_names):
+        colour = cmap(c / max(C, 1))
+        sel = pts[labels == c]
+        ax.scatter(sel[:, 0], sel[:, 1], s=14, color=colour, alpha=0.6, label=name)
+        if zero_Cx2 is not None:
+            z = np.asarray(zero_Cx2)[c]
+            ax.scatter([z[0]], [z[1]], marker="x", s=40, color=colour)
+        centre = np.asarray(centroids_Cx2)[c] if centroids_Cx2 is not None else sel.mean(axis=0)
+        ax.annotate(name, centre, fontsize=8, ha="center", va="bottom", weight="bold")
+    for text, (x, y) in (marks or {}).items():
+        ax.scatter([x], [y], marker="*", s=160, color="black", zorder=5)
+        ax.annotate(text, (x, y), fontsize=8, xytext=(4, -10), textcoords="offset points")
+    if explained is not None:
+        ax.set_xlabel(f"PC1 ({100 * float(explained[0]):.1f}% of variance)")
+        ax.set_ylabel(f"PC2 ({100 * float(explained[1]):.1f}% of variance)" if len(explained) > 1 else "PC2")
+    else:
+        ax.set_xlabel("PC1"); ax.set_ylabel("PC2")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, loc="best", markerscale=1.2, ncol=2 if C > 12 else 1)
+    ax.grid(alpha=0.3)
+    return _save_style_figure(fig, path, dpi)
+
+
+def plot_distance_heatmap(dist_CxC, style_names, path, *, title: str = "Distance between style centroids",
+                          fmt: str = "{:.2g}", dpi: int = 120) -> Path:
+    """C x C heatmap (imshow, Blues, annotated with each distance) of style-centroid distances."""
+    plt = _pyplot()
+    d = np.asarray(dist_CxC, np.float64)
+    C = len(style_names)
+    fig, ax = plt.subplots(figsize=(1.0 + 0.55 * C, 0.6 + 0.5 * C))
+    im = ax.imshow(d, cmap="Blues")
+    ax.set_xticks(range(C), labels=list(style_names), rotation=60, ha="right", fontsize=8)
+    ax.set_yticks(range(C), labels=list(style_names), fontsize=8)
+    hi = d.max() if d.size else 0.0
+    if C <= 30:
+        for i in range(C):
+            for j in range(C):
+                ax.text(j, i, fmt.format(d[i, j]), ha="center", va="center", fontsize=6,
+                        color="white" if hi > 0 and d[i, j] > 0.6 * hi else "black")
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
+    ax.set_title(title, fontsize=10)
+    return _save_style_figure(fig, path, dpi)

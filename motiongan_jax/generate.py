@@ -1,0 +1,630 @@
+"""Generation from a trained model: style specs, input curves, G, root height and outputs.
+
+The pieces bin/generate.py strings together (each usable on its own):
+
+    parse_style(text, style_names, seed)  -> StyleSpec     a label, mix, expression, w file, random
+    style_codes(state, specs, names, z)   -> w (N, w_dim)  in w space, z = 0 by default
+    load_curve(text, length, scale)       -> Curve         a shape, a CSV/JSON file or a BVH root path
+    prepare_curve(curve, sample_rate, speed) -> (T, 3)     equal spacing, T a multiple of 8
+    generate_motion(state, layout, curve, w) -> Generated  G, integration, floor
+    write_outputs(out, generated, ...)                     .bvh / .npz / .gif / .mp4 / .png
+
+Style (all in w space, the Latent Transform's output, computed with one z for every operand):
+- a label `Happy`;
+- a mix `Sad:0.3,Happy:0.7`: w = sum a_k w_k with the weights normalised to sum 1 (so weights
+  1 and 0 give one style's w exactly, and `Sad:1,Happy:1` is the half-way mix);
+- an expression `OldMan - Normal + Marching` (optional coefficients `0.5*Happy`): w = sum ±c_k w_k,
+  as the reference's `--style_mode operation`;
+- a raw w vector: a .npy or .txt file of w_dim numbers;
+- `random`: a label drawn from the seed.
+z: `zero` (default, like the reference's inference: w = LT(0, label)), `seed` (one z ~ N(0, I)
+from the seed), or an integer K (K draws from the seed -> K outputs).
+
+Curve -> G input. The curve (metres, floor x-z) is resampled at equal arc length with spacing
+speed / sample_rate, sample_rate = meta fps / data.frame_step (15 Hz for the shipped configs);
+speed defaults to DEFAULT_SPEED_M_PER_S (1.2 m/s, an ordinary adult walk; the embedded styles
+range from 0.54 to 1.65 m/s, mean 1.08; checkpoints store no data statistics), and for a BVH
+curve to that clip's own mean speed. G is fully convolutional in time, so any length works as
+long as T is a multiple of 8: the tail is trimmed to a multiple of 8 (< 8 samples, said on
+stderr); a curve shorter than 16 samples is extended straight along its last direction. The
+whole curve goes through G in one pass (instance-norm statistics then span the whole curve, not
+a training window: spec §6 item 18).
+
+Root height. G predicts the root velocity (y included) and root-relative joints, never an
+absolute height. The root is integrated from the curve's start (curves.integrate: p[0] = start,
+p[t] = p[t-1] + v[t]), then each clip is lifted as a whole so that the 5th percentile over frames
+of its lowest joint's height is 0: feet on the floor, robust to a few frames of dipping toes.
+(The reference hard-coded a start height per style name, spec §6 item 26.)
+
+Outputs (by suffix; several motions -> .bvh/.npz get one file each, `name_<i>.ext`;
+.gif/.mp4/.png show them side by side). Every file is written atomically: on an error nothing
+(not even a partial file) is left at the output path.
+- .bvh: ik.positions_to_motion on the layout's skeleton (see ik.py for the twist rule): bone
+  directions exact, bone lengths the skeleton's; metres by default (Blender's BVH importer maps
+  one file unit to one Blender unit = 1 m at its default scale 1.0, and converts Y-up to its
+  Z-up with its default axes), or centimetres with units="cm" (import those with scale 0.01).
+- .npz: positions (T, J, 3) float64 metres, Y up (the generated joints, after the floor shift);
+  positions_skeleton (T, J, 3): the same pose on the skeleton's bone lengths (= FK of the .bvh);
+  joint_names, parents, fps (samples per second), style, w, z, curve (T, 3), floor_shift_m.
+- .gif (Pillow) / .mp4 (ffmpeg or imageio-ffmpeg): a chase-camera animation (viz.animate_motions).
+- .png: stroboscopic strips (viz.pose_strips), the form of the paper's Figs. 4, 6 and 7.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motiongan_jax import atomic, curves, ik
+from motiongan_jax import step as step_lib
+from motiongan_jax.representation import from_rows
+
+DEFAULT_SPEED_M_PER_S = 1.2
+MIN_T = 16
+FLOOR_PERCENTILE = 5.0
+SHAPE_POINTS_PER_M = 100  # built-in shapes are drawn at 1 cm before resampling
+OUTPUT_SUFFIXES = (".bvh", ".npz", ".gif", ".mp4", ".png")
+BVH_UNITS = {"m": 1.0, "cm": 100.0}
+FIGURES = ("styles", "interp", "arith")
+INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+# jitted once per shape: one XLA compile of G (~3 s on CPU) instead of op-by-op dispatch (~8 s)
+_apply_g = jax.jit(lambda state, vel, w: step_lib.generator_apply(state, vel, w_BxW=w))
+_latent_w = jax.jit(step_lib.latent_w)
+
+
+class GenerateError(ValueError):
+    """Bad user input to generation (style, curve option, output path); the message says which."""
+
+
+class StyleError(GenerateError):
+    """A style spec that names no style, or is malformed."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Styles
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class StyleSpec:
+    """A parsed style. kind: "label", "mix", "expr" or "file". terms: (style name, coefficient)
+    pairs (label: one pair with 1.0; mix: normalised weights); path: the w file (kind "file");
+    text: a readable description (used in titles and saved files)."""
+
+    kind: str
+    terms: tuple[tuple[str, float], ...] = ()
+    path: str | None = None
+    text: str = ""
+
+
+def unknown_style_message(name: str, style_names: Sequence[str]) -> str:
+    close = difflib.get_close_matches(name, list(style_names), n=1, cutoff=0.0)
+    lower = {s.lower(): s for s in style_names}
+    best = lower.get(name.lower()) or (close[0] if close else None)
+    hint = f"; did you mean {best!r}?" if best else ""
+    return f"unknown style {name!r}{hint} Valid styles: {', '.join(style_names)}"
+
+
+def _resolve_name(name: str, style_names: Sequence[str]) -> str:
+    name = name.strip()
+    if name in style_names:
+        return name
+    matches = [s for s in style_names if s.lower() == name.lower()]
+    if len(matches) == 1:
+        return matches[0]
+    raise StyleError(unknown_style_message(name, style_names))
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise StyleError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise StyleError(f"{what}: {text!r} is not a finite number")
+    return value
+
+
+def _parse_mix(text: str, style_names) -> StyleSpec:
+    terms = []
+    for part in text.split(","):
+        if not part.strip():
+            raise StyleError(f"malformed mix {text!r}: empty entry (use Name:weight,Name:weight)")
+        if part.count(":") != 1:
+            raise StyleError(f"malformed mix {text!r}: entry {part.strip()!r} is not Name:weight")
+        name, weight = part.split(":")
+        terms.append((_resolve_name(name, style_names),
+                      _number(weight.strip(), f"malformed mix {text!r}: weight of {name.strip()!r}")))
+    names = [n for n, _ in terms]
+    if len(set(names)) != len(names):
+        raise StyleError(f"malformed mix {text!r}: a style appears twice")
+    total = sum(a for _, a in terms)
+    if abs(total) < 1e-9:
+        raise StyleError(f"malformed mix {text!r}: the weights sum to 0 (they are normalised to sum 1)")
+    terms = tuple((n, a / total) for n, a in terms)
+    return StyleSpec("mix", terms, text=",".join(f"{n}:{a:.3g}" for n, a in terms))
+
+
+_NUM_RE = re.compile(r"\s*((?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*\*\s*")
+_OP_RE = re.compile(r"\s*([+-])\s*")
+
+
+def _parse_expression(text: str, style_names) -> StyleSpec:
+    """Terms [sign] [number *] Name joined by + and -; names are matched longest first, so a
+    style name that contains '-' (e.g. Bandai's not-confident) is one operand."""
+    names_by_len = sorted(style_names, key=len, reverse=True)
+    terms: list[tuple[str, float]] = []
+    n = len(text)
+
+    def skip(i):
+        while i < n and text[i].isspace():
+            i += 1
+        return i
+
+    sign, i = 1.0, 0
+    m = _OP_RE.match(text, 0)
+    if m:  # a leading sign
+        sign, i = (-1.0 if m.group(1) == "-" else 1.0), m.end()
+    while True:
+        coef = 1.0
+        m = _NUM_RE.match(text, i)
+        if m:
+            coef, i = float(m.group(1)), m.end()
+        i = skip(i)
+        if i >= n:
+            raise StyleError(f"malformed expression {text!r}: "
+                             f"{'empty' if not terms and i == 0 else 'ends with an operator'}")
+        name = _starts_name(text, i, names_by_len)
+        if name is None:
+            if text[i] in "+-*":
+                raise StyleError(f"malformed expression {text!r}: expected a style name at "
+                                 f"position {i + 1}, found {text[i]!r}")
+            token = re.match(r"[^\s+*,:-]+", text[i:]).group(0)
+            raise StyleError(unknown_style_message(token, style_names))
+        terms.append((name, sign * coef))
+        i = skip(i + len(name))
+        if i >= n:
+            break
+        m = _OP_RE.match(text, i)
+        if not m:
+            raise StyleError(f"malformed expression {text!r}: expected + or - at position {i + 1}, "
+                             f"found {text[i]!r}")
+        sign, i = (-1.0 if m.group(1) == "-" else 1.0), m.end()
+    parts = []
+    for k, (nm, c) in enumerate(terms):
+        op = "- " if c < 0 else ("+ " if k else "")
+        parts.append(op + (f"{abs(c):g}*" if abs(c) != 1 else "") + nm)
+    return StyleSpec("expr", tuple(terms), text=" ".join(parts))
+
+
+def _starts_name(text: str, i: int, names_by_len) -> str | None:
+    """The longest style name starting at text[i] and ending at a term boundary (or None).
+    Case-sensitive first, then case-insensitive."""
+    for fold in (False, True):
+        for name in names_by_len:
+            chunk = text[i:i + len(name)]
+            if (chunk.lower() == name.lower()) if fold else (chunk == name):
+                rest = text[i + len(name):].lstrip()
+                if not rest or rest[0] in "+-":
+                    return name
+    return None
+
+
+def parse_style(text: str, style_names: Sequence[str], seed: int = 0) -> StyleSpec:
+    """A style spec from the command line (see the module doc). Raises StyleError naming the
+    problem; an unknown name lists the valid ones and the closest match."""
+    if not isinstance(text, str) or not text.strip():
+        raise StyleError(f"empty style; valid styles: {', '.join(style_names)}")
+    text = text.strip()
+    names = list(style_names)
+    if text in names:
+        return StyleSpec("label", ((text, 1.0),), text=text)
+    if text.lower() == "random":
+        k = int(jax.random.randint(jax.random.fold_in(jax.random.key(seed), 1), (), 0, len(names)))
+        return StyleSpec("label", ((names[k], 1.0),), text=names[k])
+    if text.lower().endswith((".npy", ".txt")):
+        if not Path(text).is_file():
+            raise StyleError(f"style file {text!r} not found (a .npy/.txt style is a raw w vector)")
+        return StyleSpec("file", path=text, text=Path(text).stem)
+    if ":" in text or "," in text:
+        return _parse_mix(text, names)
+    if _OP_RE.search(text) or "*" in text:
+        # a name that contains '-' is a label, not an expression
+        name = _starts_name(text, 0, sorted(names, key=len, reverse=True))
+        if name is not None and len(name) == len(text):
+            return StyleSpec("label", ((name, 1.0),), text=name)
+        return _parse_expression(text, names)
+    return StyleSpec("label", ((_resolve_name(text, names), 1.0),), text=_resolve_name(text, names))
+
+
+def load_w_file(path: str, w_dim: int) -> np.ndarray:
+    """A raw style code from .npy or .txt: exactly w_dim numbers (any shape with that size)."""
+    try:
+        w = np.load(path) if path.lower().endswith(".npy") else np.loadtxt(path, ndmin=1)
+    except (OSError, ValueError) as e:
+        raise StyleError(f"style file {path}: cannot read a w vector ({e})") from None
+    w = np.asarray(w, np.float64).reshape(-1)
+    if w.size != w_dim:
+        raise StyleError(f"style file {path} has {w.size} values, but this checkpoint's style code "
+                         f"w has {w_dim} (model.w_dim): incompatible with this model")
+    if not np.isfinite(w).all():
+        raise StyleError(f"style file {path}: non-finite values")
+    return w.astype(np.float32)
+
+
+def w_dim(state) -> int:
+    """The style code's size (model.w_dim), read off the Latent Transform's last layer."""
+    return int(jax.eval_shape(lambda s: step_lib.latent_w(s, jnp.zeros((1,), jnp.int32)), state).shape[-1])
+
+
+def z_codes(state, z: str | int = "zero", seed: int = 0) -> np.ndarray:
+    """(K, z_dim) noise codes: "zero" -> one zero z; "seed" -> one N(0, I) draw from the seed;
+    an integer K (or its string) -> K draws from the seed."""
+    z_dim = step_lib.generator_z_dim(state)
+    key = jax.random.fold_in(jax.random.key(seed), 2)
+    if isinstance(z, str) and z.strip().lower() == "zero":
+        return np.zeros((1, z_dim), np.float32)
+    if isinstance(z, str) and z.strip().lower() == "seed":
+        return np.asarray(jax.random.normal(key, (1, z_dim), jnp.float32))
+    try:
+        k = int(z)
+    except (TypeError, ValueError):
+        raise GenerateError(f"--z must be 'zero', 'seed' or a number of samples, got {z!r}") from None
+    if not 1 <= k <= 64:
+        raise GenerateError(f"--z: number of samples must be 1..64, got {k}")
+    return np.asarray(jax.random.normal(key, (k, z_dim), jnp.float32))
+
+
+def style_codes(state, specs: Sequence[StyleSpec], style_names: Sequence[str],
+                z_KxZ: np.ndarray | None = None) -> np.ndarray:
+    """w (len(specs) * K, w_dim) float32: for each spec, for each of the K z codes (default one
+    zero z). Every label's w is computed in one fixed batch (all labels x all z), so a style's
+    w does not depend on the other specs; sums are taken in float64, so weights 1 and 0 give
+    that style's w exactly."""
+    z_dim, D, C = step_lib.generator_z_dim(state), w_dim(state), len(style_names)
+    z = np.zeros((1, z_dim), np.float32) if z_KxZ is None else np.asarray(z_KxZ, np.float32)
+    if z.ndim != 2 or z.shape[1] != z_dim:
+        raise GenerateError(f"z must be (K, {z_dim}), got shape {z.shape}")
+    K = len(z)
+    labels = np.repeat(np.arange(C, dtype=np.int32), K)
+    w_all = np.asarray(_latent_w(state, jnp.asarray(labels), jnp.asarray(np.tile(z, (C, 1)))),
+                       np.float64).reshape(C, K, D)
+    index = {n: i for i, n in enumerate(style_names)}
+    out = []
+    for s in specs:
+        if s.kind == "file":
+            out.append(np.broadcast_to(load_w_file(s.path, D), (K, D)))
+            continue
+        acc = np.zeros((K, D))
+        for name, c in s.terms:
+            acc = acc + c * w_all[index[name]]
+        out.append(acc)
+    return np.concatenate(out).astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Curves
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Curve:
+    """A user curve before resampling: (P, 2) floor points (x, z) in metres, and for a BVH curve
+    its own mean speed and the spline interval (in points) that smooths its gait sway."""
+
+    points: np.ndarray
+    description: str
+    speed_m_per_s: float | None = None
+    smooth_interval: int | None = None
+
+
+def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
+               control_seconds: float | None = None) -> Curve:
+    """A shape name (curves.SHAPES, with length/scale in metres), or a .csv/.txt/.json file of
+    x,z points in metres, or a .bvh file (its pelvis path, units guessed from the leg length,
+    smoothed by a spline with a knot every `control_seconds` as in training).
+    Raises GenerateError, curves.CurveFileError or curves.DegenerateCurveError."""
+    text = str(text).strip()
+    if text in curves.SHAPES:
+        try:
+            natural = None if length is None else float(length)
+            total = natural
+            if total is None:
+                total = {"line": scale, "circle": 2 * math.pi * scale, "s_curve": 2 * math.pi * scale,
+                         "figure8": 4 * math.pi * scale, "corner": 2 * scale}[text]
+            num = int(min(max(total * SHAPE_POINTS_PER_M, 256), 1_000_000))
+            pts = curves.shape_curve(text, length=natural, scale=scale, num_points=num)
+        except ValueError as e:
+            if isinstance(e, curves.DegenerateCurveError):
+                raise
+            raise GenerateError(f"curve {text!r}: {e}") from None
+        return Curve(pts, f"{text} (scale {scale:g} m, length {_polyline_length(pts):.3g} m)")
+    path = Path(text)
+    if not path.is_file():
+        raise GenerateError(f"curve {text!r}: not a shape name ({', '.join(curves.SHAPES)}) and "
+                            f"no such file")
+    if path.suffix.lower() == ".bvh":
+        from motiongan_jax import bvh, kinematics, representation
+
+        motion = bvh.read_bvh(path)
+        units = representation.guess_units_to_m(motion.skeleton)
+        root = representation.representation_root(motion.skeleton)
+        pts = curves.curve_from_root_positions(kinematics.world_positions(motion)[:, root] * units)
+        frames = len(pts)
+        seconds = (frames - 1) * motion.frame_time
+        interval = None
+        if control_seconds is not None:
+            interval = max(2, int(round(control_seconds / motion.frame_time)))
+        smoothed = pts if interval is None else curves.resample_polyline(pts, num_points=frames,
+                                                                          smooth_interval=interval)
+        speed = _polyline_length(smoothed) / seconds if seconds > 0 else None
+        return Curve(pts, f"{path.name} (root path, {frames} frames, {seconds:.3g} s)",
+                     speed if speed and speed > 0 else None, interval)
+    return Curve(curves.load_curve_file(path), f"{path.name}")
+
+
+def _polyline_length(pts) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(np.asarray(pts), axis=0), axis=1)))
+
+
+def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | None = None,
+                  log: Callable[[str], None] | None = None) -> np.ndarray:
+    """G's input curve: (T, 3) float32 (x, 0, z) metres, equal spacing speed / sample_rate,
+    T a multiple of 8 and >= 16 (trimmed or extended as in the module doc; said through `log`).
+    speed defaults to the curve's own (a BVH) or DEFAULT_SPEED_M_PER_S."""
+    if not isinstance(curve, Curve):
+        curve = Curve(curves.check_curve(curve, "curve"), "curve")
+    if speed is None:
+        speed = curve.speed_m_per_s or DEFAULT_SPEED_M_PER_S
+    speed = float(speed)
+    if not (math.isfinite(speed) and speed > 0):
+        raise GenerateError(f"speed must be a positive number of m/s, got {speed}")
+    if not (math.isfinite(sample_rate) and sample_rate > 0):
+        raise GenerateError(f"sample rate must be positive, got {sample_rate}")
+    spacing = speed / sample_rate
+    xz = curves.resample_polyline(curve.points, spacing=spacing, smooth_interval=curve.smooth_interval)
+    M = len(xz)
+    note = f"curve {curve.description}: {M} samples at {spacing:.3g} m ({speed:.3g} m/s at {sample_rate:g} Hz)"
+    if M < MIN_T:
+        d = xz[-1] - xz[-2]
+        d = d / max(np.linalg.norm(d), 1e-12) * spacing
+        xz = np.concatenate([xz, xz[-1] + d * np.arange(1, MIN_T - M + 1)[:, None]])
+        note += f"; extended straight to {MIN_T} samples (G needs at least {MIN_T})"
+    elif M % 8:
+        T = M - M % 8
+        note += (f"; trimmed to {T} (a multiple of 8): the last {(M - T) * spacing:.3g} m "
+                 f"({M - T} sample{'s' if M - T > 1 else ''}) are not walked")
+        xz = xz[:T]
+    if log is not None:
+        log(note)
+    T = len(xz)
+    return np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], -1).astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Generation
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Generated:
+    positions: np.ndarray  # (B, T, J, 3) float64 metres, Y up, after the floor shift
+    root_velocity: np.ndarray  # (B, T, 3) G's raw root velocity (m per sample)
+    pose: np.ndarray  # (B, T, R) G's raw root-relative rows
+    curve: np.ndarray  # (T, 3) the input curve
+    w: np.ndarray  # (B, w_dim)
+    floor_shift_m: np.ndarray  # (B,) added to every height
+
+
+def sample_rate(meta: dict, cfg) -> float:
+    """Network samples per second: source fps / data.frame_step."""
+    return float(meta["fps"]) / int(cfg.data.frame_step)
+
+
+def floor_shift(positions_BxTxJx3: np.ndarray, percentile: float = FLOOR_PERCENTILE) -> np.ndarray:
+    """(B,) heights to add so that the `percentile` of each clip's lowest-joint height is 0."""
+    lowest = np.asarray(positions_BxTxJx3)[..., 1].min(axis=-1)  # (B, T)
+    return -np.percentile(lowest, percentile, axis=-1)
+
+
+def generate_motion(state, layout, curve_Tx3, w_BxW) -> Generated:
+    """Runs G on one curve for a batch of style codes; integrates the root from the curve start
+    and puts each clip's feet on the floor (module doc)."""
+    curve = np.asarray(curve_Tx3, np.float32)
+    T = curve.shape[0]
+    if curve.ndim != 2 or curve.shape[1] != 3 or T % 8 or T < MIN_T:
+        raise GenerateError(f"curve must be (T, 3) with T a multiple of 8 and >= {MIN_T}, got {curve.shape}")
+    w = np.asarray(w_BxW, np.float32)
+    B = w.shape[0]
+    vel = curves.velocity(jnp.broadcast_to(jnp.asarray(curve), (B, T, 3)))
+    root_vel, pose = _apply_g(state, vel, jnp.asarray(w))
+    root_vel = np.asarray(root_vel, np.float64)
+    pose = np.asarray(pose, np.float64)
+    start = np.broadcast_to(curve[0].astype(np.float64) * np.array([1.0, 0.0, 1.0]), (B, 3))
+    # curves.integrate's convention (p[0] = start, p[t] = p[t-1] + v[t], v[0] unused), in float64
+    root = start[:, None, :] + np.concatenate([np.zeros((B, 1, 3)), np.cumsum(root_vel[:, 1:], axis=1)], 1)
+    joints = np.asarray(from_rows(root, pose, layout), np.float64)
+    if not np.isfinite(joints).all():
+        raise GenerateError("the generator produced non-finite positions (a broken checkpoint?)")
+    shift = floor_shift(joints)
+    joints[..., 1] += shift[:, None, None]
+    return Generated(joints, root_vel, pose, curve, w, shift)
+
+
+# ---------------------------------------------------------------------------------------------
+# Figures: the lists of (title, style) behind the paper's Figs. 4, 6 and 7
+# ---------------------------------------------------------------------------------------------
+
+
+def figure_specs(kind: str, text: str | None, style_names: Sequence[str], seed: int = 0
+                 ) -> list[tuple[str, StyleSpec]]:
+    """(title, spec) panels of a figure.
+    styles: a comma-separated list of styles (default: every style) on one curve (Fig. 4);
+    interp: "A,B" -> w = (1-α) w_A + α w_B at α = 0, 1/4, 1/2, 3/4, 1 (Fig. 6);
+    arith: an expression -> each operand, then the result (Fig. 7)."""
+    names = list(style_names)
+    if kind == "styles":
+        items = names if text is None or text.strip().lower() in ("", "all") else text.split(",")
+        specs = [parse_style(t, names, seed) for t in items]
+        return [(s.text, s) for s in specs]
+    if kind == "interp":
+        parts = [] if text is None else [p for p in re.split(r"\s*,\s*", text.strip()) if p]
+        if len(parts) != 2:
+            raise StyleError(f"--figure interp needs two styles 'A,B', got {text!r}")
+        a, b = (_resolve_name(p, names) for p in parts)
+        out = []
+        for alpha in INTERP_ALPHAS:
+            spec = StyleSpec("mix", ((a, 1.0 - alpha), (b, alpha)), text=f"{a}:{1 - alpha:g},{b}:{alpha:g}")
+            out.append((f"{a} {1 - alpha:g} / {b} {alpha:g}", spec))
+        return out
+    if kind == "arith":
+        if text is None:
+            raise StyleError("--figure arith needs an expression, e.g. 'OldMan - Normal + Marching'")
+        spec = parse_style(text, names, seed)
+        if spec.kind != "expr":
+            raise StyleError(f"--figure arith needs an expression of several styles joined by + "
+                             f"and -, got {text!r}")
+        ops = [(n, StyleSpec("label", ((n, 1.0),), text=n)) for n, _ in spec.terms]
+        return ops + [(spec.text, spec)]
+    raise GenerateError(f"unknown figure {kind!r}; one of {', '.join(FIGURES)}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Outputs
+# ---------------------------------------------------------------------------------------------
+
+
+def check_output_path(out, *, count: int = 1) -> list[Path]:
+    """The file(s) an output will be written to; GenerateError for an unsupported suffix, a
+    missing or unwritable directory, or a directory in the way. Nothing is created."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise GenerateError(f"output {out}: unsupported format {out.suffix or '(none)'!r}; use one of "
+                            f"{', '.join(OUTPUT_SUFFIXES)}")
+    parent = out.parent
+    if parent.exists() and not parent.is_dir():
+        raise GenerateError(f"cannot write {out}: {parent} is not a directory")
+    if not parent.is_dir():
+        raise GenerateError(f"cannot write {out}: directory {parent} does not exist")
+    try:  # a real probe: os.access says yes to root even where writing fails (/proc, read-only mounts)
+        fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{out.name}.", suffix=".probe")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise GenerateError(f"cannot write {out}: directory {parent} is not writable "
+                            f"({e.strerror})") from None
+    paths = [out] if count == 1 or suffix in (".gif", ".mp4", ".png") else \
+        [out.with_name(f"{out.stem}_{i}{out.suffix}") for i in range(count)]
+    for p in paths:
+        if p.is_dir():
+            raise GenerateError(f"cannot write {p}: it is a directory")
+        if p.exists() and not os.access(p, os.W_OK):
+            raise GenerateError(f"cannot write {p}: the existing file is read-only")
+    if suffix == ".mp4":
+        from motiongan_jax import viz
+
+        try:
+            viz.video_writer(out, 15.0)
+        except RuntimeError as e:
+            raise GenerateError(str(e)) from None
+    return paths
+
+
+def rest_offsets(layout, positions_TxJx3=None, log: Callable[[str], None] | None = None) -> np.ndarray:
+    """The export skeleton's rest offsets: the layout's (checkpoints since rest offsets were
+    stored), else the bone directions of the first frame at the layout's bone lengths."""
+    if layout.rest_offsets_m is not None:
+        return np.asarray(layout.rest_offsets_m, np.float64)
+    if positions_TxJx3 is None:
+        raise GenerateError("this checkpoint stores no rest offsets (older than BVH export): "
+                            "a rest pose is needed")
+    p0 = np.asarray(positions_TxJx3, np.float64)[0]
+    par = np.asarray(layout.parents[1:])
+    d = p0[1:] - p0[par]
+    n = np.linalg.norm(d, axis=-1, keepdims=True)
+    d = np.where(n > 1e-9, d / np.maximum(n, 1e-12), np.array([0.0, 1.0, 0.0]))
+    if log is not None:
+        log("note: the checkpoint stores no rest offsets; the BVH rest pose is the first frame's pose")
+    return np.concatenate([np.zeros((1, 3)), d * np.asarray(layout.bone_lengths_m)[:, None]])
+
+
+def to_bvh_motion(positions_TxJx3, layout, fps: float, units: str = "m", log=None):
+    """(bvh.Motion, ExportSkeleton) of one generated clip (see ik.py)."""
+    if units not in BVH_UNITS:
+        raise GenerateError(f"BVH units must be one of {', '.join(BVH_UNITS)}, got {units!r}")
+    rest = rest_offsets(layout, positions_TxJx3, log)
+    scale = BVH_UNITS[units]
+    motion = ik.positions_to_motion(positions_TxJx3, layout.joint_names, layout.parents, rest,
+                                    1.0 / fps, units_per_m=scale)
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, rest, scale)
+    return motion, ex
+
+
+def save_bvh(path, positions_TxJx3, layout, fps: float, units: str = "m", log=None) -> Path:
+    from motiongan_jax import bvh
+
+    motion, _ = to_bvh_motion(positions_TxJx3, layout, fps, units, log)
+    bvh.write_bvh(path, motion, precision=6 if units == "cm" else 7)
+    return Path(path)
+
+
+def save_npz(path, gen: Generated, index: int, layout, fps: float, style: str, z=None,
+             log=None) -> Path:
+    pos = gen.positions[index]
+    motion, ex = to_bvh_motion(pos, layout, fps, "m", log)
+    skel = ik.layout_positions(motion, ex)
+    arrays = dict(positions=pos, positions_skeleton=skel,
+                  joint_names=np.array(layout.joint_names), parents=np.array(layout.parents, np.int32),
+                  fps=np.float64(fps), style=np.array(style), w=gen.w[index],
+                  curve=gen.curve, floor_shift_m=np.float64(gen.floor_shift_m[index]))
+    if z is not None:
+        arrays["z"] = np.asarray(z, np.float32)
+    path = Path(path)
+    with atomic.atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+    return path
+
+
+def write_outputs(out, gen: Generated, titles: Sequence[str], layout, fps: float, *,
+                  bvh_units: str = "m", z_per_motion=None, log: Callable[[str], None] | None = None
+                  ) -> list[Path]:
+    """Writes every motion of `gen` to `out` by its suffix (module doc); returns the paths."""
+    from motiongan_jax import viz
+
+    out = Path(out)
+    B = gen.positions.shape[0]
+    paths = check_output_path(out, count=B)
+    suffix = out.suffix.lower()
+    parents = list(layout.parents)
+    try:
+        if suffix == ".bvh":
+            for i, p in enumerate(paths):
+                save_bvh(p, gen.positions[i], layout, fps, bvh_units, log)
+        elif suffix == ".npz":
+            for i, p in enumerate(paths):
+                save_npz(p, gen, i, layout, fps, titles[i],
+                         None if z_per_motion is None else z_per_motion[i], log)
+        elif suffix in (".gif", ".mp4"):
+            viz.animate_motions(list(gen.positions), parents, list(titles), out, fps=fps,
+                                curves=[gen.curve] * B)
+        else:
+            viz.pose_strips(list(gen.positions), parents, list(titles), out, curves=[gen.curve] * B)
+    except RuntimeError as e:  # e.g. ffmpeg vanished between the check and the write
+        raise GenerateError(str(e)) from None
+    except OSError as e:  # the temporary file is gone with the error (atomic writes)
+        raise GenerateError(f"cannot write {out}: {e.strerror or e}") from None
+    return paths

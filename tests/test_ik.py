@@ -1,0 +1,159 @@
+"""Positions -> BVH rotations (ik.py): Euler decomposition, round trips through FK and BVH text."""
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from motiongan_jax import bvh, ik, kinematics, representation, synthetic
+
+
+@pytest.fixture(scope="module")
+def layout():
+    """The embedded dataset's kept joints: 28 joints, several with 2 or 3 children."""
+    return representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
+
+
+def _layout_motion(layout, F, seed):
+    """Random poses by FK on the layout's own rest skeleton (every non-leaf joint rotates)."""
+    rng = np.random.default_rng(seed)
+    J = layout.num_joints
+    has_child = {p for p in layout.parents if p >= 0}
+    channels = tuple(("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation") if j == 0
+                     else (("Zrotation", "Xrotation", "Yrotation") if j in has_child else ())
+                     for j in range(J))
+    sk = bvh.Skeleton(layout.joint_names, layout.parents, np.asarray(layout.rest_offsets_m), channels)
+    cols = []
+    for j, ch in enumerate(channels):
+        for c in ch:
+            cols.append(rng.normal(0, 1, F) if c.endswith("position") else rng.uniform(-180, 180, F))
+    motion = bvh.Motion(sk, 1 / 15, np.stack(cols, -1))
+    return kinematics.world_positions(motion)
+
+
+def _angles(a, b):
+    """Angle (rad) between unit vectors, accurate near 0."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+def _lengths(pos, parents):
+    return np.linalg.norm(pos[..., 1:, :] - pos[..., list(parents[1:]), :], axis=-1)
+
+
+@pytest.mark.parametrize("order", ["".join(p) for p in itertools.permutations("XYZ")])
+def test_matrix_to_euler_inverts_the_bvh_convention_even_at_gimbal_lock(order):
+    rng = np.random.default_rng(0)
+    ang = rng.uniform(-180, 180, (500, 3))
+    ang[:20, 1] = 90.0
+    ang[20:40, 1] = -90.0
+    R = Rotation.from_euler(order, ang, degrees=True).as_matrix()  # uppercase: intrinsic
+    np.testing.assert_allclose(np.asarray(kinematics.euler_to_matrix(ang[:5].astype(np.float32), order)),
+                               R[:5], atol=1e-5)  # same convention as the reader's FK
+    back = ik.matrix_to_euler(R, order)
+    assert np.all(np.abs(back[:, 1]) <= 90 + 1e-9)
+    np.testing.assert_allclose(Rotation.from_euler(order, back, degrees=True).as_matrix(), R, atol=1e-12)
+
+
+def test_min_rotation_maps_a_to_b_including_opposite_and_equal_vectors():
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(300, 3))
+    b = rng.normal(size=(300, 3))
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    b[:10] = -a[:10]
+    b[10:20] = a[10:20]
+    R = ik.min_rotation(a, b)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", R, a), b, atol=1e-12)
+    np.testing.assert_allclose(R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
+    np.testing.assert_allclose(R[10:20], np.broadcast_to(np.eye(3), (10, 3, 3)), atol=1e-12)
+    # minimal: the rotation axis is perpendicular to a (no twist about a)
+    rotvec = Rotation.from_matrix(R[20:]).as_rotvec()
+    np.testing.assert_allclose(np.sum(rotvec * a[20:], axis=-1), 0.0, atol=1e-9)
+
+
+def test_export_skeleton_adds_a_zero_length_branch_per_child_of_a_branching_joint(layout):
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m)
+    sk = ex.skeleton
+    assert [sk.names[e] for e in ex.kept_index] == list(layout.joint_names)
+    extra = [n for n in sk.names if n not in layout.joint_names]
+    # Hips (3 children), Spine1 (3), each hand (2)
+    assert len(extra) == 3 + 3 + 2 + 2
+    assert "LThumb" in extra and "RThumb" in extra  # a leaf's branch is named so the reader restores it
+    for e, n in enumerate(sk.names):
+        if n in extra:
+            assert np.all(sk.offsets[e] == 0) and len(sk.channels[e]) == 3
+    assert sk.channels[0][:3] == ik.ROOT_CHANNELS
+
+
+@pytest.mark.parametrize("units", ["m", "cm"])
+def test_rigid_poses_round_trip_through_bvh_text(layout, units, tmp_path):
+    """FK on the rest skeleton -> IK -> BVH file -> read_bvh -> FK gives the positions back."""
+    scale = {"m": 1.0, "cm": 100.0}[units]
+    pos = _layout_motion(layout, 60, seed=2)
+    motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m,
+                                    1 / 15, units_per_m=scale)
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m, scale)
+    assert np.abs(ik.layout_positions(motion, ex) - pos).max() < 1e-9  # in memory
+    path = tmp_path / f"rigid_{units}.bvh"
+    bvh.write_bvh(path, motion, precision=7)
+    back = bvh.read_bvh(path)
+    got = kinematics.world_positions(back)[:, list(ex.kept_index)] / scale
+    assert np.abs(got - pos).max() < 1e-5  # measured 5e-8 m (metres, 7 decimals), 2e-8 m (cm, 6)
+    # reading the file with the usual rules recovers the layout: branch joints are zero-length
+    again = representation.layout_from_skeleton(back.skeleton, 1.0 / scale)
+    assert again.joint_names == layout.joint_names and again.parents == layout.parents
+    np.testing.assert_allclose(again.rest_offsets_m, layout.rest_offsets_m, atol=1e-6)
+
+
+def test_non_rigid_poses_get_exact_bone_directions_and_the_skeletons_lengths(layout):
+    rng = np.random.default_rng(3)
+    rigid = _layout_motion(layout, 80, seed=4)
+    pos = rigid + rng.normal(0, 0.03, rigid.shape)  # bones 3 cm off in every direction
+    motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m, 1 / 15)
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m)
+    got = ik.layout_positions(motion, ex)
+    angle = _angles(ik.bone_directions(got, layout.parents), ik.bone_directions(pos, layout.parents))
+    assert angle.max() < 1e-4  # measured 3e-11 rad (5e-8 rad through BVH text)
+    np.testing.assert_allclose(_lengths(got, layout.parents),
+                               np.broadcast_to(layout.bone_lengths_m, (80, layout.num_joints - 1)), atol=1e-9)
+    np.testing.assert_allclose(got[:, 0], pos[:, 0], atol=1e-12)
+
+
+def test_degenerate_and_collinear_cases():
+    # joint 1 has two children along the same rest direction (no plane): fallback is still exact
+    names = ("root", "a", "b", "c", "b_EndSite", "c_EndSite")
+    parents = (-1, 0, 1, 1, 2, 3)
+    rest = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 0], [0, 2, 0], [1, 0, 0], [1, 0, 0]], float)
+    rng = np.random.default_rng(5)
+    pos = rng.normal(size=(30, 6, 3))  # arbitrary, non-rigid
+    pos[3, 1] = pos[3, 0]  # a zero-length posed bone keeps its rest direction
+    motion = ik.positions_to_motion(pos, names, parents, rest, 0.1)
+    ex = ik.export_skeleton(names, parents, rest)
+    got = ik.layout_positions(motion, ex)
+    assert np.isfinite(got).all()
+    ok = np.ones((30, 5), bool)
+    ok[3, 0] = False
+    angle = _angles(ik.bone_directions(got, parents), ik.bone_directions(pos, parents))
+    assert angle[ok].max() < 1e-9
+    with pytest.raises(ik.IKError, match="non-finite"):
+        bad = pos.copy()
+        bad[4, 2, 0] = np.nan
+        ik.positions_to_motion(bad, names, parents, rest, 0.1)
+    with pytest.raises(ik.IKError, match="zero-length rest"):
+        ik.export_skeleton(names, parents, np.zeros((6, 3)))
+    with pytest.raises(ik.IKError, match="positions must be"):
+        ik.positions_to_motion(pos[:, :4], names, parents, rest, 0.1)
+
+
+def test_euler_channels_are_continuous_for_a_spinning_root(layout):
+    """Heading through several full turns: unwrapped angles, no 360 degree jumps."""
+    F = 200
+    pos0 = _layout_motion(layout, 1, seed=6)[0] - _layout_motion(layout, 1, seed=6)[0, :1]
+    heading = np.linspace(0, 4 * np.pi, F)
+    R = Rotation.from_rotvec(heading[:, None] * np.array([0, 1, 0])).as_matrix()
+    pos = np.einsum("fij,kj->fki", R, pos0)
+    motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m, 1 / 15)
+    jumps = np.abs(np.diff(motion.values, axis=0))
+    assert jumps.max() < 10.0  # degrees per frame (the heading moves 3.6)
