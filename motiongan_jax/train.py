@@ -116,11 +116,11 @@ def write_preview(path: Path, state, generate_fn, meta: dict, curve_Tx3: np.ndar
     start = jnp.asarray(curve_Tx3[0]).at[1].set(0.0)
     start = jnp.broadcast_to(start, (len(labels), 3))
     root = curves.integrate(start, root_vel)
-    # the generator predicts no absolute height: lift the root to the data's bone-derived hip height
+    # integrated from the curve's start on the floor: put the lowest joint on the floor
     layout = RowLayout(tuple(meta["joint_names"]), tuple(meta["parents"]), (), (), np.asarray(meta["bone_lengths_m"]))
     joints = np.array(from_rows(root, pose, layout))
     joints[..., 1] -= joints[..., 1].min(axis=(1, 2), keepdims=True)
-    return viz.animate_skeletons(list(joints), meta["parents"], [styles[i] for i in labels], path,
+    return viz.animate_motions(list(joints), meta["parents"], [styles[i] for i in labels], path,
                                  curves=[curve_Tx3] * len(labels))
 
 
@@ -169,7 +169,9 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
         log(f"nothing to do: checkpoint step {start} >= train.num_steps {total}")
         return {}
 
-    spacing = float(jnp.mean(jnp.linalg.norm(jnp.diff(arrays.root_Nx3[:, jnp.array([0, 2])], axis=0), axis=-1))) * cfg.data.frame_step
+    # the training data's mean distance per sample, measured within clips
+    spacing = float(np.mean([np.linalg.norm(np.diff(c.root_Fx3[:, [0, 2]], axis=0), axis=-1).mean()
+                             for c in dataset.train])) * cfg.data.frame_step
     preview = preview_curve(cfg.data.window_T, spacing)
     bar = Progress(total, start, progress)
     last: dict = {}

@@ -60,7 +60,10 @@ def test_same_seed_same_parameters(unbroken, tiny, tmp_path):
 
 
 def test_other_seed_other_parameters(unbroken, tiny, tmp_path):
-    train_lib.train(override(tiny, ["train.seed=1", "train.num_steps=2"]), tmp_path, progress=False, log=lambda s: None)
+    train_lib.train(override(tiny, ["train.seed=1", "train.num_steps=2", "train.preview_every=2"]), tmp_path,
+                    progress=False, log=lambda s: None)
+    gif = tmp_path / "previews" / "step_0000002.gif"
+    assert gif.read_bytes()[:6] == b"GIF89a"
     a, _ = _params(unbroken[0], 2)
     b, _ = _params(tmp_path, 2)
     assert not np.array_equal(np.asarray(jax.tree.leaves(a.g_params)[0]), np.asarray(jax.tree.leaves(b.g_params)[0]))
