@@ -72,6 +72,9 @@ class ModelConfig:
     z_dim: int = 64
     # Where z comes from: "transform" (N(0, I) through the Latent Transform), "zeros".
     use_z: str = "transform"
+    # Latent Transform init: "paper" (w ~ 2e-5 at init, as the reference) or "torch_default"
+    # (w ~ 0.1: the style path gets gradient from the start; for short runs).
+    latent_init: str = "paper"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -202,6 +205,7 @@ def validate(cfg: Config) -> Config:
     need(m.kw >= 1 and m.kw % 2 == 1, "model.kw", "must be odd")
     need(m.w_dim >= 1 and m.z_dim >= 1, "model.w_dim", "w_dim and z_dim must be positive")
     need(m.use_z in ("transform", "zeros"), "model.use_z", "one of transform, zeros")
+    need(m.latent_init in ("paper", "torch_default"), "model.latent_init", "one of paper, torch_default")
     need(t.batch_size >= 1, "train.batch_size", "must be >= 1")
     need(t.num_steps >= 1, "train.num_steps", "must be >= 1")
     need(t.lr_g > 0 and t.lr_d > 0, "train.lr_g", "learning rates must be positive")

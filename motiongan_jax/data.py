@@ -170,7 +170,7 @@ def preprocess_clip(path: Path, label: FileLabel, units_to_m: float, start_offse
                 names=tuple(str(s) for s in z["names"]),
                 parents=tuple(int(p) for p in z["parents"]),
                 offsets=z["offsets"],
-                channels=tuple(tuple(json.loads(str(z["channels"])))[j] for j in range(len(z["names"]))),
+                channels=tuple(tuple(c) for c in json.loads(str(z["channels"]))),
             )
             layout = layout_from_skeleton(skeleton, units_to_m)
             return Clip(str(path), label, float(z["fps"]), z["root"], z["pose"], layout)

@@ -55,7 +55,7 @@ def _num_joints(layout) -> int:
 def _build_g(model_cfg, num_joints: int, num_styles: int, key) -> Generator:
     m = model_cfg
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
-                     num_styles=num_styles, rngs=nnx.Rngs(key))
+                     num_styles=num_styles, latent_init=m.latent_init, rngs=nnx.Rngs(key))
 
 
 def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key) -> Discriminator:

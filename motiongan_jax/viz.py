@@ -242,3 +242,28 @@ def plot_distance_heatmap(dist_CxC, style_names, path, *, title: str = "Distance
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
     ax.set_title(title, fontsize=10)
     return _save_style_figure(fig, path, dpi)
+
+
+def plot_metrics(records: list[dict], path, *, keys=("d_total", "g_adv", "g_cls", "g_curve", "g_bone",
+                                                      "d_cls_acc_real", "g_cls_acc_fake"), title: str = "") -> Path:
+    """Loss curves from metrics.jsonl records, one panel per key (log scale where positive)."""
+    plt = _pyplot()
+    keys = [k for k in keys if any(k in r for r in records)]
+    fig, axes = plt.subplots(1, len(keys), figsize=(2.6 * len(keys), 2.4), squeeze=False)
+    steps = np.array([r["step"] for r in records])
+    for ax, k in zip(axes[0], keys):
+        v = np.array([r.get(k, np.nan) for r in records], dtype=float)
+        ax.plot(steps, v, lw=0.6, color="0.6")
+        if len(v) >= 10:  # a running mean over 10 logged points
+            ax.plot(steps[9:], np.convolve(v, np.ones(10) / 10, mode="valid"), lw=1.2, color="tab:blue")
+        if k.startswith(("g_curve", "g_bone")) and np.all(v[np.isfinite(v)] > 0):
+            ax.set_yscale("log")
+        ax.set_title(k, fontsize=8)
+        ax.tick_params(labelsize=6)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return path

@@ -321,3 +321,15 @@ def test_latent_transform_pixel_norm_is_scale_invariant(gen27):
     w_scaled = jax.jit(g.latent.from_embedding)(3.0 * e, 3.0 * z)
     np.testing.assert_allclose(np.asarray(w), np.asarray(w_scaled), rtol=1e-4, atol=1e-12)
     chex.assert_shape(g.latent.embed[...], (C, 64))
+
+
+def test_latent_init_sets_the_scale_of_w():
+    from motiongan_jax.nn.latent import LatentTransform
+
+    labels, z = jnp.arange(4) % 3, jax.random.normal(jax.random.key(1), (4, 16))
+    paper = LatentTransform(3, z_dim=16, w_dim=16, rngs=nnx.Rngs(0))(labels, z)
+    torch = LatentTransform(3, z_dim=16, w_dim=16, init="torch_default", rngs=nnx.Rngs(0))(labels, z)
+    rms = lambda w: float(jnp.sqrt(jnp.mean(w ** 2)))  # noqa: E731
+    assert rms(paper) < 1e-3 < 1e-2 < rms(torch)
+    with pytest.raises(ValueError, match="latent init"):
+        LatentTransform(3, z_dim=16, w_dim=16, init="bogus", rngs=nnx.Rngs(0))

@@ -74,6 +74,7 @@ class Generator(nnx.Module):
         w_dim: int = 64,
         z_dim: int = 64,
         num_styles: int,
+        latent_init: str = "paper",
         rngs: nnx.Rngs,
     ):
         if not 1 <= num_joints <= MAX_JOINTS:
@@ -84,7 +85,7 @@ class Generator(nnx.Module):
         self.num_rows = 3 * num_joints
         self.w_dim = w_dim
         self.z_dim = z_dim
-        self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, rngs=rngs)
+        self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
             return StyledBlock(Conv(cin, cout, (kw, kwidth), stride, pad_w=pad_w, rngs=rngs), cout, w_dim, rngs=rngs)
