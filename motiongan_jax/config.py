@@ -75,6 +75,11 @@ class ModelConfig:
     # Latent Transform init: "paper" (w ~ 2e-5 at init, as the reference) or "torch_default"
     # (w ~ 0.1: the style path gets gradient from the start; for short runs).
     latent_init: str = "paper"
+    # The networks' unit of length, in metres. Data stay in metres outside; G and D see lengths
+    # divided by this, and the curve and bone losses are measured in it. The paper's data were in
+    # CMU units (0.056444 m): in metres G's first instance norm would see variances near its
+    # epsilon (1e-8), and the loss weights would change their balance.
+    length_unit: float = 0.056444
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,9 +97,6 @@ class TrainConfig:
     w_g_bone: float = 0.1
     w_d_adv: float = 1.0
     w_d_cls: float = 5.0
-    # Lengths in the curve and bone losses are divided by this (metres) so that the paper's
-    # weights keep their relative size when we train in metres: 1 CMU unit = 0.056444 m.
-    loss_length_unit: float = 0.056444
     # Number of points of the curve loss (paper: 4).
     curve_points: int = 4
     # "bce_prob" reproduces the reference (BCE on sigmoid/softmax probabilities);
@@ -210,7 +212,7 @@ def validate(cfg: Config) -> Config:
     need(t.num_steps >= 1, "train.num_steps", "must be >= 1")
     need(t.lr_g > 0 and t.lr_d > 0, "train.lr_g", "learning rates must be positive")
     need(0 <= t.beta1 < 1 and 0 <= t.beta2 < 1, "train.beta1", "betas must be in [0, 1)")
-    need(t.loss_length_unit > 0, "train.loss_length_unit", "must be positive")
+    need(m.length_unit > 0, "model.length_unit", "must be positive")
     need(t.curve_points >= 1 and d.window_T % t.curve_points == 0, "train.curve_points",
          "must divide the window length T")
     need(t.gan_loss in GAN_LOSSES, "train.gan_loss", f"one of {GAN_LOSSES}")

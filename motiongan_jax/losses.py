@@ -8,7 +8,7 @@ Two forms of the GAN and class losses, chosen by `TrainConfig.gan_loss`:
 * "bce_logit": sigmoid BCE on logits and softmax cross-entropy, numerically stable.
 
 Units. Data are in metres, the paper's loss weights were tuned on CMU units (1 unit = 0.056444 m).
-The curve and bone losses divide every length by `unit` (TrainConfig.loss_length_unit) so their
+The curve and bone losses divide every length by `unit` (ModelConfig.length_unit) so their
 size relative to the GAN terms is the paper's.
 """
 

@@ -55,12 +55,13 @@ def _num_joints(layout) -> int:
 def _build_g(model_cfg, num_joints: int, num_styles: int, key) -> Generator:
     m = model_cfg
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
-                     num_styles=num_styles, latent_init=m.latent_init, rngs=nnx.Rngs(key))
+                     num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
+                     rngs=nnx.Rngs(key))
 
 
 def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key) -> Discriminator:
     return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
-                         kw=model_cfg.kw, rngs=nnx.Rngs(key))
+                         kw=model_cfg.kw, length_unit=model_cfg.length_unit, rngs=nnx.Rngs(key))
 
 
 def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array) -> tuple[Generator, Discriminator]:
@@ -176,14 +177,14 @@ def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, 
 
 
 def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, curve_BxTx3,
-             bone_pairs, bone_lengths_m, train_cfg) -> dict[str, jax.Array]:
-    """G's loss terms (one D call). Curve and bone losses are in units of loss_length_unit."""
+             bone_pairs, bone_lengths_m, train_cfg, length_unit: float) -> dict[str, jax.Array]:
+    """G's loss terms (one D call). Curve and bone losses are in units of length_unit."""
     t = train_cfg
     adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True)
     adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
     cls = losses.class_loss(cls_f, fake_labels_B, t.gan_loss)
-    curve = losses.curve_loss(fake_vel_BxTx3, curve_BxTx3, t.curve_points, t.loss_length_unit)
-    bone = losses.bone_loss(fake_pose_BxTxR, bone_pairs, bone_lengths_m, t.loss_length_unit)
+    curve = losses.curve_loss(fake_vel_BxTx3, curve_BxTx3, t.curve_points, length_unit)
+    bone = losses.bone_loss(fake_pose_BxTxR, bone_pairs, bone_lengths_m, length_unit)
     return {
         "g_adv": adv,
         "g_cls": cls,
@@ -265,7 +266,8 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         # --- G update through the updated D --------------------------------------------------
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
-            terms = g_losses(d, *fake_out, fake_labels, curve, bone_pairs, bone_lengths, tcfg)
+            terms = g_losses(d, *fake_out, fake_labels, curve, bone_pairs, bone_lengths, tcfg,
+                             cfg.model.length_unit)
             return terms["g_total"], (terms, nnx.state(d, SpectralNormState))
 
         (_, (g_terms, sn)), fake_grads = jax.value_and_grad(g_objective, has_aux=True)(fake)

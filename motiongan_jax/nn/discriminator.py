@@ -47,6 +47,7 @@ class Discriminator(nnx.Module):
         seq_len: int = 128,
         top: int = 64,
         kw: int = 5,
+        length_unit: float = 1.0,
         rngs: nnx.Rngs,
     ):
         if not 1 <= num_joints <= PADDED_ROWS // 3:
@@ -55,6 +56,7 @@ class Discriminator(nnx.Module):
             raise ValueError(f"D needs T divisible by 16, got {seq_len}")
         self.num_joints = num_joints
         self.seq_len = seq_len
+        self.length_unit = float(length_unit)
 
         def sn_conv(cin, cout):
             return Conv(cin, cout, (kw, 3), (2, 3), spectral_norm=True, rngs=rngs)
@@ -85,7 +87,8 @@ class Discriminator(nnx.Module):
     def features(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
                  update_stats: bool = False) -> jax.Array:
         """Activations after c1_0 and its LeakyReLU, B x T/4 x 9 x 2top (style search)."""
-        x = self._input(root_vel_BxTx3, pose_BxTxR)
+        # inputs in metres; the layers work in length_unit, like the generator
+        x = self._input(root_vel_BxTx3 / self.length_unit, pose_BxTxR / self.length_unit)
         x = leaky_relu(self.c0_0(x, update_stats=update_stats))
         return leaky_relu(self.c1_0(x, update_stats=update_stats))
 

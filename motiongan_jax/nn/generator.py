@@ -75,6 +75,7 @@ class Generator(nnx.Module):
         z_dim: int = 64,
         num_styles: int,
         latent_init: str = "paper",
+        length_unit: float = 1.0,
         rngs: nnx.Rngs,
     ):
         if not 1 <= num_joints <= MAX_JOINTS:
@@ -83,6 +84,8 @@ class Generator(nnx.Module):
             raise ValueError(f"kw must be odd, got {kw}")
         self.num_joints = num_joints
         self.num_rows = 3 * num_joints
+        # inputs and outputs are in metres; the layers work in this unit (the paper's data unit)
+        self.length_unit = float(length_unit)
         self.w_dim = w_dim
         self.z_dim = z_dim
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
@@ -124,7 +127,7 @@ class Generator(nnx.Module):
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
         w = w_BxW
-        x = curve_vel_BxTx3[..., None]  # B x T x 3 x 1
+        x = (curve_vel_BxTx3 / self.length_unit)[..., None]  # B x T x 3 x 1
         x = self.ec0_0(x, w)
         x = self.ec1_0(x, w)
         e1 = self.ec1_1(x, w)
@@ -143,6 +146,6 @@ class Generator(nnx.Module):
         x = self.dc1_1(x, w)
         d0 = self.dc1_0(x, w)
 
-        root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :]
-        pose_BxTxR = self.dc0_0(d0)[..., 0]
+        root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :] * self.length_unit
+        pose_BxTxR = self.dc0_0(d0)[..., 0] * self.length_unit
         return root_vel_BxTx3, pose_BxTxR
