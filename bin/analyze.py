@@ -4,7 +4,7 @@
   python bin/analyze.py --workdir DIR --out OUTDIR [--k 10] [--seed 0] [--step N]
                         [--search CLIP.bvh|CLIP.npz [--search-curve SHAPE|CURVE.csv|.json]
                          [--search-steps 200] [--search-keep 4] [--search-random 4]
-                         [--search-windows 4] [--search-lr 0.1]]
+                         [--search-windows 4] [--search-T T] [--search-lr 0.1]]
 
 Writes into OUTDIR:
   pca.png       2-D PCA of the style codes w (K per style from z ~ N(0, I); crosses: z = 0),
@@ -135,10 +135,11 @@ def run(args, log=print) -> dict:
     marks = {}
     if args.search:
         log(f"style search: {args.search}")
-        target = A.motion_windows(args.search, meta, cfg, layout, max_windows=args.search_windows)
+        target = A.motion_windows(args.search, meta, cfg, layout, max_windows=args.search_windows,
+                                  T=args.search_T)
         found = A.search_motion(state, codes, target, num_random=args.search_random, keep=args.search_keep,
                                 steps=args.search_steps, lr=args.search_lr, key=k_search,
-                                length_unit=cfg.train.loss_length_unit)
+                                length_unit=cfg.model.length_unit)
         res = found["result"]
         marks[f"search: {Path(args.search).stem}"] = tuple(two(A.pca_transform(p, res.w_W[None]))[0])
         rv, pose = A.reconstruct(state, target, res.w_W)
@@ -151,7 +152,7 @@ def run(args, log=print) -> dict:
         true_style = stem.split("_", 1)[0] if stem.split("_", 1)[0] in names else None
         search = {
             "source": str(args.search), "windows": int(target.root_NxTx3.shape[0]),
-            "window_T": cfg.data.window_T, "frame_step": target.frame_step,
+            "window_T": int(target.root_NxTx3.shape[1]), "frame_step": target.frame_step,
             "start_frames": target.start_frames, "speed_m_per_sample": spacing,
             "loss": "0.01 MSE(root velocity) + MSE(pose rows), lengths in CMU units (0.056444 m)",
             "steps": args.search_steps, "lr": args.search_lr,
@@ -204,6 +205,9 @@ def main(argv=None) -> int:
     ap.add_argument("--search-keep", type=int, default=4, help="starts optimised (the best as they are)")
     ap.add_argument("--search-random", type=int, default=4, help="random starts besides the centroids")
     ap.add_argument("--search-windows", type=int, default=4, help="at most this many windows of the clip")
+    ap.add_argument("--search-T", type=int, default=None,
+                    help="samples per window (a multiple of 8; default the model's T). Longer windows "
+                         "give G's instance norms more samples and a smoother loss over w")
     args = ap.parse_args(argv)
     if args.k < 2:
         ap.error("--k must be >= 2")

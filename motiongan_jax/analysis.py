@@ -24,7 +24,19 @@ training), then minimise a reconstruction loss through G over w alone with optax
 warm-up that starts below the peak rate, then cosine decay), from several starts at once, in
 one jitted scan. Unlike the reference there is no D in the loop (its terms were detached there
 and had no effect), motion and curve cover the same frames, and nothing touches the model's
-state: the parameters enter the jitted function as inputs and are never written.
+state: the parameters enter the jitted function as inputs and are never written. One code is
+fitted to all windows together (the reference fitted each window separately).
+
+What to expect from the search (measured, not assumed):
+- The loss over w is rough when windows are short. G's encoder ends at T/8 time samples with
+  width 1, so at the tiny config's T = 16 its last instance norms normalise 2 values per channel
+  (close to a sign function) and at the cpu config's T = 32, 4 values; the loss then changes by a
+  few per cent for steps in w far below the codes' spread, and a local optimiser stalls. Windows
+  of 64+ samples (`T=`, `--search-T`; G is convolutional in time) give a smooth loss in which a
+  known code is recovered to ~1e-7 (tests/test_analysis.py).
+- The pose term compares joints at equal times, so a target whose gait phase differs from what
+  G produces for that curve keeps a large loss whatever the style: the loss ranks styles only
+  when G's poses are good.
 """
 
 from __future__ import annotations
@@ -52,9 +64,18 @@ class AnalysisError(ValueError):
     """A problem with analysis inputs (a motion that does not fit the model, a short clip, ...)."""
 
 
+_apply_w = jax.jit(lambda gstate, vel, w: step_lib.generator_apply(gstate, vel, w_BxW=w))
+
+
 def _g_only(state):
     """The state with only what G needs, so jitted functions neither copy nor key on D/optimisers."""
     return state.replace(d_params=None, d_sn_state=None, opt_g_state=None, opt_d_state=None)
+
+
+def apply_code(state, curve_vel_BxTx3, w_BxW):
+    """(root_vel, pose) of G for style codes w (jitted; compiled once per shape: the inputs are
+    taken through numpy so that arrays from any computation share one cache entry)."""
+    return _apply_w(_g_only(state), np.asarray(curve_vel_BxTx3, np.float32), np.asarray(w_BxW, np.float32))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -124,6 +145,12 @@ def pca(X_NxD, num_components: int | None = None) -> PCA:
     k = min(N, D) if num_components is None else int(num_components)
     if not 1 <= k <= min(N, D):
         raise ValueError(f"num_components must be in 1..{min(N, D)} for {N} points in {D}-D, got {k}")
+    return _pca(X, k)
+
+
+@functools.partial(jax.jit, static_argnames="k")
+def _pca(X, k: int) -> PCA:
+    N = X.shape[0]
     mean = jnp.mean(X, axis=0)
     Xc = X - mean
     _, S, Vt = jnp.linalg.svd(Xc, full_matrices=False)
@@ -269,6 +296,7 @@ class ProbeResult(NamedTuple):
     components: int | None  # features used per fold (None: the raw codes)
 
 
+@jax.jit
 def _r2(Y, P):
     ss_res = jnp.sum(jnp.square(Y - P), axis=0)
     ss_tot = jnp.sum(jnp.square(Y - jnp.mean(Y, axis=0)), axis=0)
@@ -333,23 +361,26 @@ def linear_probe(X_NxD, Y_NxP, *, groups_N=None, folds: int = 5, components: int
             return max(1, min(D, (n_eff - 1) // 2))
         return max(1, min(int(components), D))
 
-    pred = jnp.zeros_like(Y)
+    # Fold bookkeeping on the host; every fit is one jitted jnp function (compiled once per shape).
+    Xh, Yh = np.asarray(X), np.asarray(Y)
+    pred = np.zeros_like(Yh)
     ks = []
     for f in range(num_folds):
         te = fold == f
         k = k_for(~te)
         ks.append(k)
-        pred = pred.at[np.nonzero(te)[0]].set(_fit_predict(X[~te], Y[~te], X[te], k))
+        pred[te] = np.asarray(_fit_predict(Xh[~te], Yh[~te], Xh[te], k))
     k_all = k_for(np.ones(N, bool))
-    r2_train = _r2(Y, _fit_predict(X, Y, X, k_all))
-    return ProbeResult(np.asarray(_r2(Y, pred)), np.asarray(r2_train), np.asarray(pred), num_folds,
+    r2_train = _r2(Yh, _fit_predict(Xh, Yh, Xh, k_all))
+    return ProbeResult(np.asarray(_r2(Yh, jnp.asarray(pred))), np.asarray(r2_train), pred, num_folds,
                        None if ks[0] is None else int(min(ks)))
 
 
 def gait_parameters(meta: dict, cfg) -> dict | None:
     """Ground-truth gait parameters of the embedded dataset, or None for other data.
 
-    {"param_names": [...], "style_YxP": (C, P) per label, "clips": {clip_name: (P,)}}. Read from the
+    {"param_names": [...], "style_YxP": (C, P) per label, "clips": {clip_name: (P,)}}: the
+    GaitParams fields plus the derived speed (m/s = stride_length · cadence / 2). Read from the
     dataset's styles.json when it is at meta["data_dir"]; otherwise, for a run on the default
     embedded dataset, the per-style values come from `synthetic.STYLES` (no clips)."""
     from motiongan_jax import synthetic
@@ -367,7 +398,7 @@ def gait_parameters(meta: dict, cfg) -> dict | None:
     names = list(synthetic.PARAM_NAMES)
     if manifest is not None:
         table = manifest.get("styles", {})
-        clips = {c: np.array([v[n] for n in names], np.float64) for c, v in manifest.get("clips", {}).items()}
+        clips = manifest.get("clips", {})
     elif cfg.data.data_dir is None and cfg.data.label_rule == "synthetic":
         table = {s: p.to_dict() for s, p in synthetic.STYLES.items()}
         clips = {}
@@ -375,8 +406,13 @@ def gait_parameters(meta: dict, cfg) -> dict | None:
         return None
     if any(s not in table for s in styles):
         return None
-    Y = np.array([[table[s][n] for n in names] for s in styles], np.float64)
-    return {"param_names": names, "style_YxP": Y, "clips": clips}
+
+    def row(v: dict) -> list[float]:  # the parameters, then the derived walking speed
+        return [float(v[n]) for n in names] + [float(v["stride_length"]) * float(v["cadence"]) / 2.0]
+
+    Y = np.array([row(table[s]) for s in styles], np.float64)
+    return {"param_names": names + ["speed"], "style_YxP": Y,
+            "clips": {c: np.array(row(v), np.float64) for c, v in clips.items()}}
 
 
 def probe_report(codes: StyleCodes, gait: dict) -> dict:
@@ -430,6 +466,10 @@ class MotionWindows:
         return float(jnp.mean(d))
 
 
+_clean_curves = jax.jit(functools.partial(curves.window_curves, noise=0.0, key=None),
+                        static_argnames=("T", "interval"))
+
+
 def windows_from_rows(root_Fx3, pose_FxR, *, T: int, frame_step: int, interval: int,
                       max_windows: int | None = None, source: str = "") -> MotionWindows:
     """Non-overlapping windows (each T samples, frame_step apart; the next starts T·frame_step
@@ -447,8 +487,8 @@ def windows_from_rows(root_Fx3, pose_FxR, *, T: int, frame_step: int, interval: 
     starts = np.arange(count) * T * frame_step
     frames = starts[:, None] + frame_step * np.arange(T)[None, :]
     path_frames = starts[:, None] + np.arange(span)[None, :]
-    xz = curves._clean_curves_jit(root[path_frames][..., [0, 2]], np.full(count, span, np.int32),
-                                  T=int(T), interval=int(interval))
+    xz = _clean_curves(root[path_frames][..., [0, 2]], np.full(count, span, np.int32), T=int(T),
+                       interval=int(interval))
     curve = jnp.stack([xz[..., 0], jnp.zeros_like(xz[..., 0]), xz[..., 1]], axis=-1)
     return MotionWindows(jnp.asarray(root[frames]), jnp.asarray(pose[frames]), curve.astype(jnp.float32),
                          starts, int(frame_step), source)
@@ -515,15 +555,18 @@ def load_motion(path, meta: dict, cfg, layout: RowLayout, *, units_to_m: float |
 
 
 def motion_windows(path, meta: dict, cfg, layout: RowLayout, *, max_windows: int | None = 8,
-                   units_to_m: float | None = None, clip: int = 0) -> MotionWindows:
-    """`load_motion` + `windows_from_rows` with the model's T, frame step and spline interval,
-    both scaled by the clip's fps over the training fps (so a 120 fps clip is sampled at the
-    training's 15 Hz too)."""
+                   units_to_m: float | None = None, clip: int = 0, T: int | None = None) -> MotionWindows:
+    """`load_motion` + `windows_from_rows` with the model's T (or `T`, a multiple of 8: G is
+    convolutional in time), frame step and spline interval, the last two scaled by the clip's
+    fps over the training fps (so a 120 fps clip is sampled at the training's rate too)."""
+    T = cfg.data.window_T if T is None else int(T)
+    if T < 16 or T % 8:
+        raise AnalysisError(f"window length T must be a multiple of 8 and >= 16, got {T}")
     root, pose, fps = load_motion(path, meta, cfg, layout, units_to_m=units_to_m, clip=clip)
     ratio = fps / float(meta.get("fps") or fps)
     step = max(1, int(round(cfg.data.frame_step * ratio)))
     interval = max(2, int(round(cfg.data.control_point_interval * ratio)))
-    return windows_from_rows(root, pose, T=cfg.data.window_T, frame_step=step, interval=interval,
+    return windows_from_rows(root, pose, T=T, frame_step=step, interval=interval,
                              max_windows=max_windows, source=str(path))
 
 
@@ -625,7 +668,7 @@ def search_starts(codes: StyleCodes, num_random: int = 4, key: jax.Array | None 
 
 
 def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence[str] | None = None, *,
-                 center_W=None, scale_W=None, steps: int = 300, lr: float = 0.1, warmup: int = 20,
+                 center_W=None, scale_W=None, steps: int = 200, lr: float = 0.1, warmup: int = 20,
                  vel_weight: float = 0.01, length_unit: float = 0.056444,
                  record_every: int = 10) -> SearchResult:
     """Fit one code w to all of the target's windows, from every start at once (one jitted scan).
@@ -646,35 +689,27 @@ def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence
     center = jnp.zeros((W,), jnp.float32) if center_W is None else jnp.asarray(center_W, jnp.float32)
     scale = jnp.ones((W,), jnp.float32) if scale_W is None else jnp.asarray(scale_W, jnp.float32)
     chex.assert_shape([center, scale], (W,))
-    vel = curves.velocity(target.curve_NxTx3)
-    u = curves.velocity(target.root_NxTx3)
-    w, final, hist = _search_scan(_g_only(state), vel, u, target.pose_NxTxR, (w0 - center) / scale,
-                                  center, scale, jnp.float32(lr), jnp.float32(vel_weight),
-                                  jnp.float32(length_unit), steps=int(steps), warmup=int(warmup),
-                                  record_every=int(record_every))
+    # numpy in: one jit cache entry whatever device computation made the inputs
+    host = lambda x: np.asarray(x, np.float32)  # noqa: E731
+    w, final, hist = _search_scan(_g_only(state), host(curves.velocity(target.curve_NxTx3)),
+                                  host(curves.velocity(target.root_NxTx3)), host(target.pose_NxTxR),
+                                  host((w0 - center) / scale), host(center), host(scale), host(lr),
+                                  host(vel_weight), host(length_unit), steps=int(steps),
+                                  warmup=int(warmup), record_every=int(record_every))
     final, hist, w = np.asarray(final), np.asarray(hist), np.asarray(w)
+    if not np.isfinite(final).any():
+        raise AnalysisError(f"style search diverged from every start (final losses {final}); lower lr")
     best = int(np.nanargmin(final))
     return SearchResult(w[best], float(final[best]), best, names, w, hist[0], final, hist, int(record_every))
 
 
-@jax.jit
-def _start_losses(gstate, vel_NxTx3, u_NxTx3, pose_NxTxR, w_SxW, vel_weight, length_unit):
-    S, N = w_SxW.shape[0], vel_NxTx3.shape[0]
-
-    def one(w_W):
-        rv, pose = step_lib.generator_apply(gstate, vel_NxTx3, w_BxW=jnp.broadcast_to(w_W, (N, w_W.shape[0])))
-        return jnp.mean(_window_losses(rv, pose, u_NxTx3, pose_NxTxR, vel_weight, length_unit))
-
-    return jax.lax.map(one, w_SxW)
-
-
 def start_losses(state, target: MotionWindows, w_SxW, *, vel_weight: float = 0.01,
                  length_unit: float = 0.056444) -> np.ndarray:
-    """The reconstruction loss of each code as it is (G forward only, one start at a time)."""
-    return np.asarray(_start_losses(_g_only(state), curves.velocity(target.curve_NxTx3),
-                                    curves.velocity(target.root_NxTx3), target.pose_NxTxR,
-                                    jnp.asarray(w_SxW, jnp.float32), jnp.float32(vel_weight),
-                                    jnp.float32(length_unit)))
+    """The reconstruction loss of each code as it is (G forward only, one start at a time, with
+    the same compiled forward as `reconstruct`)."""
+    return np.array([float(jnp.mean(reconstruction_loss(*reconstruct(state, target, w), target,
+                                                         vel_weight=vel_weight, length_unit=length_unit)))
+                     for w in jnp.asarray(w_SxW, jnp.float32)])
 
 
 def search_motion(state, codes: StyleCodes, target: MotionWindows, *, num_random: int = 4,
@@ -715,14 +750,12 @@ def nearest_to(w_W, codes: StyleCodes, k: int = 3) -> list[list]:
 # ---------------------------------------------------------------------------------------------
 
 
-_apply_w = jax.jit(lambda gstate, vel, w: step_lib.generator_apply(gstate, vel, w_BxW=w))
-
-
 def reconstruct(state, target: MotionWindows, w_W):
     """G's (root_vel, pose) for every window of the target with one code w."""
     N = target.curve_NxTx3.shape[0]
-    w = jnp.broadcast_to(jnp.asarray(w_W, jnp.float32), (N, jnp.asarray(w_W).shape[-1]))
-    return _apply_w(_g_only(state), curves.velocity(target.curve_NxTx3), w)
+    # numpy in: the same jit cache entry whether w comes from numpy or from a device computation
+    w = np.broadcast_to(np.asarray(w_W, np.float32), (N, np.shape(w_W)[-1]))
+    return apply_code(state, curves.velocity(target.curve_NxTx3), w)
 
 
 def generate_along(state, layout: RowLayout, w_W, curve_xz_Px2, *, spacing_m: float,
@@ -738,8 +771,7 @@ def generate_along(state, layout: RowLayout, w_W, curve_xz_Px2, *, spacing_m: fl
                             f"needs at least 16 (draw a longer curve)")
     xz = xz[:T]
     curve = np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], axis=-1).astype(np.float32)
-    w = jnp.asarray(w_W, jnp.float32).reshape(1, -1)
-    root_vel, pose = _apply_w(_g_only(state), curves.velocity(jnp.asarray(curve)[None]), w)
+    root_vel, pose = apply_code(state, curves.velocity(jnp.asarray(curve)[None]), np.reshape(w_W, (1, -1)))
     start = jnp.asarray([[curve[0, 0], start_height_m, curve[0, 2]]], jnp.float32)
     root = curves.integrate(start, root_vel)[0]
     positions = from_rows(root, pose[0], layout)
