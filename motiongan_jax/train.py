@@ -19,7 +19,6 @@ import numpy as np
 
 from motiongan_jax import atomic, checkpoint, curves, data, parallel, step as step_lib
 from motiongan_jax.config import Config, config_hash, to_dict
-from motiongan_jax.representation import from_rows
 
 
 class NonFiniteError(FloatingPointError):
@@ -105,23 +104,14 @@ def preview_curve(T: int, spacing_m: float) -> np.ndarray:
     return np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], -1).astype(np.float32)
 
 
-def write_preview(path: Path, state, generate_fn, meta: dict, curve_Tx3: np.ndarray, num: int = 3) -> Path:
-    from motiongan_jax import viz
-    from motiongan_jax.representation import RowLayout
+def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray, num: int = 3) -> Path:
+    """A few styles (z = 0) walking the fixed preview curve, as a GIF: generate.py's own path."""
+    from motiongan_jax import generate, viz
 
-    styles = meta["style_names"]
-    labels = np.linspace(0, len(styles) - 1, min(num, len(styles))).round().astype(np.int32)
-    vel = curves.velocity(jnp.asarray(curve_Tx3)[None].repeat(len(labels), 0))
-    root_vel, pose = generate_fn(state, vel, jnp.asarray(labels))
-    start = jnp.asarray(curve_Tx3[0]).at[1].set(0.0)
-    start = jnp.broadcast_to(start, (len(labels), 3))
-    root = curves.integrate(start, root_vel)
-    # integrated from the curve's start on the floor: put the lowest joint on the floor
-    layout = RowLayout(tuple(meta["joint_names"]), tuple(meta["parents"]), (), (), np.asarray(meta["bone_lengths_m"]))
-    joints = np.array(from_rows(root, pose, layout))
-    joints[..., 1] -= joints[..., 1].min(axis=(1, 2), keepdims=True)
-    return viz.animate_motions(list(joints), meta["parents"], [styles[i] for i in labels], path,
-                                 curves=[curve_Tx3] * len(labels))
+    labels = np.linspace(0, len(style_names) - 1, min(num, len(style_names))).round().astype(np.int32)
+    gen = generate.generate_motion(state, layout, curve_Tx3, step_lib.latent_w(state, jnp.asarray(labels)))
+    return viz.animate_motions(list(gen.positions), layout.parents, [style_names[i] for i in labels], path,
+                               curves=[curve_Tx3] * len(labels))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -151,7 +141,6 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     else:
         train_step = jax.jit(step_fn, donate_argnums=0)
         sample_batch = jax.jit(sample_fn)
-    generate_fn = jax.jit(step_lib.make_generate(cfg, dataset.layout, dataset.num_styles))
 
     mngr = checkpoint.manager(workdir / "checkpoints", keep=cfg.train.keep_checkpoints)
     start = 0
@@ -188,7 +177,8 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
             pending = None
             checkpoint.save(mngr, done, state, meta)
         if cfg.train.preview_every and done % cfg.train.preview_every == 0:
-            write_preview(workdir / "previews" / f"step_{done:07d}.gif", state, generate_fn, meta, preview)
+            write_preview(workdir / "previews" / f"step_{done:07d}.gif", state, dataset.layout,
+                          dataset.style_names, preview)
     if pending is not None:
         last = _check_and_log(pending, workdir, cfg, bar, force=True)
     return last
