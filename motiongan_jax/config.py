@@ -62,6 +62,9 @@ class DataConfig:
         return self.frame_nums // self.frame_step
 
 
+OUTPUT_PRIORS = ("none", "rest_and_curve")
+
+
 @dataclasses.dataclass(frozen=True)
 class ModelConfig:
     # Channel base ("top" in the reference): G's first conv width, D's first conv width.
@@ -80,6 +83,12 @@ class ModelConfig:
     # CMU units (0.056444 m): in metres G's first instance norm would see variances near its
     # epsilon (1e-8), and the loss weights would change their balance.
     length_unit: float = 0.056444
+    # "none": the paper's G, whose heads start near zero (a collapsed skeleton standing still) and
+    # need thousands of steps to reach the data's scale. "rest_and_curve" (small configs): the
+    # pose head adds the skeleton's rest pose and the root-velocity head adds the input curve's
+    # velocity, so G starts from a skeleton of the right size moving along the curve and learns
+    # the differences. Same parameters; not the paper's network.
+    output_prior: str = "none"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,6 +217,7 @@ def validate(cfg: Config) -> Config:
     need(m.w_dim >= 1 and m.z_dim >= 1, "model.w_dim", "w_dim and z_dim must be positive")
     need(m.use_z in ("transform", "zeros"), "model.use_z", "one of transform, zeros")
     need(m.latent_init in ("paper", "torch_default"), "model.latent_init", "one of paper, torch_default")
+    need(m.output_prior in OUTPUT_PRIORS, "model.output_prior", f"one of {', '.join(OUTPUT_PRIORS)}")
     need(t.batch_size >= 1, "train.batch_size", "must be >= 1")
     need(t.num_steps >= 1, "train.num_steps", "must be >= 1")
     need(t.lr_g > 0 and t.lr_d > 0, "train.lr_g", "learning rates must be positive")

@@ -135,6 +135,17 @@ def layout_from_skeleton(skeleton: Skeleton, units_to_m: float) -> RowLayout:
     )
 
 
+def rest_positions(layout: RowLayout) -> np.ndarray:
+    """(J, 3) metres: every kept joint's rest-pose position relative to the root."""
+    if layout.rest_offsets_m is None:
+        raise ValueError("the layout has no rest offsets")
+    off = np.asarray(layout.rest_offsets_m, np.float64)
+    pos = np.zeros_like(off)
+    for k in range(1, len(off)):
+        pos[k] = pos[layout.parents[k]] + off[k]
+    return pos
+
+
 def to_rows(world_m_FxJx3: np.ndarray, layout: RowLayout) -> tuple[np.ndarray, np.ndarray]:
     """World positions of every skeleton joint -> (root_Fx3, pose_FxR)."""
     kept_FxKx3 = world_m_FxJx3[:, list(layout.source_index)]

@@ -30,6 +30,7 @@ import optax
 from flax import nnx, struct
 
 from motiongan_jax import curves, losses
+from motiongan_jax.representation import rest_positions
 from motiongan_jax.nn import Discriminator, Generator, SpectralNormState, init_split
 
 
@@ -52,10 +53,21 @@ def _num_joints(layout) -> int:
     return rows // 3
 
 
-def _build_g(model_cfg, num_joints: int, num_styles: int, key) -> Generator:
+def output_prior_rows(model_cfg, layout) -> tuple[float, ...] | None:
+    """The rest pose rows (metres) G adds to its pose head under model.output_prior
+    "rest_and_curve"; None for the paper's G ("none")."""
+    if model_cfg.output_prior == "none":
+        return None
+    if layout is None or layout.rest_offsets_m is None:
+        raise ValueError("model.output_prior='rest_and_curve' needs the skeleton's rest offsets")
+    return tuple(float(v) for v in rest_positions(layout)[1:].reshape(-1))
+
+
+def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key) -> Generator:
     m = model_cfg
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
+                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none",
                      rngs=nnx.Rngs(key))
 
 
@@ -64,11 +76,13 @@ def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key) -> 
                          kw=model_cfg.kw, length_unit=model_cfg.length_unit, rngs=nnx.Rngs(key))
 
 
-def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array) -> tuple[Generator, Discriminator]:
+def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=None
+                 ) -> tuple[Generator, Discriminator]:
     """(G, D) as NNX modules from a full Config, initialised like `init_state` with this key (equal
-    up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only."""
+    up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only.
+    `layout` is needed only for model.output_prior != "none"."""
     k_g, k_d = jax.random.split(key)
-    return (_build_g(cfg.model, num_joints, num_styles, k_g),
+    return (_build_g(cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout), k_g),
             _build_d(cfg.model, cfg.data.window_T, num_joints, num_styles, k_d))
 
 
@@ -83,7 +97,7 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array) -> TrainState:
     """Fresh G, D, spectral-norm vectors and both Adam states; step 0."""
     num_joints = _num_joints(layout)
     k_g, k_d = jax.random.split(key)
-    g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles), k_g, nnx.Param)
+    g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout)), k_g, nnx.Param)
     d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_joints, num_styles),
                                        k_d, nnx.Param, SpectralNormState)
     tx_g, tx_d = optimizers(cfg)

@@ -13,7 +13,7 @@ from motiongan_jax.config import Config
 def describe(cfg: Config) -> str:
     dataset = data.load_dataset(cfg.data)
     layout, num_styles = dataset.layout, dataset.num_styles
-    g, d = nnx.eval_shape(lambda: step_lib.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0)))
+    g, d = nnx.eval_shape(lambda: step_lib.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
     lines = [
         f"config {cfg.name}: data {dataset.data_dir} ({len(dataset.train)} train / {len(dataset.val)} val clips, "
         f"{num_styles} styles, {dataset.fps:g} fps)",

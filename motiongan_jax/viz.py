@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,10 @@ def video_writer(path, fps: float):
             raise RuntimeError(f"{path}: writing .mp4 needs ffmpeg: install it (e.g. apt-get install "
                                "ffmpeg) or `pip install imageio-ffmpeg`, or write a .gif instead")
         rcParams["animation.ffmpeg_path"] = exe
-        return FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
+        # "h264" (ffmpeg's default H.264 encoder, libx264 in imageio-ffmpeg's and distributions'
+        # builds), not "libx264": only for "h264" does matplotlib round the frame to even pixel
+        # sizes, which yuv420p needs (an odd size makes ffmpeg exit with nothing written)
+        return FFMpegWriter(fps=fps, codec="h264", extra_args=["-pix_fmt", "yuv420p"])
     raise ValueError(f"{path}: unsupported animation format {suffix!r} (use .gif or .mp4)")
 
 
@@ -115,6 +119,10 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
                 for t in range(T):
                     draw(t)
                     writer.grab_frame()
+    except subprocess.CalledProcessError as err:  # ffmpeg failed; atomic_path removed its file
+        lines = (err.stderr or "").strip().splitlines()
+        raise RuntimeError(f"{path}: ffmpeg ({err.cmd[0]}) failed with exit status {err.returncode}"
+                           + (f": {lines[-1]}" if lines else "")) from None
     finally:
         plt.close(fig)
     return path

@@ -326,6 +326,62 @@ def test_cli_mp4_without_ffmpeg_is_a_clear_error(run_dir, cli, tmp_path, capsys,
     assert not list(tmp_path.iterdir())
 
 
+def _ffmpeg_or_skip():
+    from motiongan_jax import viz
+
+    try:
+        viz.video_writer("probe.mp4", 15.0)
+    except RuntimeError as e:  # neither an ffmpeg on PATH nor imageio-ffmpeg (the viz extra)
+        pytest.skip(str(e))
+
+
+def _frames(path):
+    """Frames in a video, counted by imageio-ffmpeg (None without it)."""
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        return None
+    return imageio_ffmpeg.count_frames_and_secs(str(path))[0]
+
+
+def test_mp4_few_frames_odd_pixel_size_written_atomically(tmp_path):
+    """6 frames at 183 x 183 pixels: H.264 in yuv420p needs even sizes, which the writer rounds."""
+    from motiongan_jax import viz
+
+    _ffmpeg_or_skip()
+    joints = np.zeros((6, 3, 3))
+    joints[:, 1, 1], joints[:, 2, 1] = 0.5, 1.0
+    joints[:, :, 0] += np.arange(6)[:, None] * 0.1
+    out = viz.animate_motions([joints], [-1, 0, 1], ["stick"], tmp_path / "a.mp4", fps=15, size=3, dpi=61)
+    data = out.read_bytes()
+    assert data[4:8] == b"ftyp"  # an ISO base media (MP4) file starts with its ftyp box
+    assert _frames(out) in (None, 6)
+    assert [p.name for p in tmp_path.iterdir()] == ["a.mp4"]  # no temporary file left
+
+
+def test_cli_mp4(run_dir, cli, tmp_path, capsys):
+    _ffmpeg_or_skip()
+    out = tmp_path / "walk.mp4"
+    assert cli(["--workdir", str(run_dir), "--style", "Happy", "--curve", "line", "--length",
+                str((T_LONG - 1) * SPEED / 15 + 1e-6), "--out", str(out)]) == 0
+    assert capsys.readouterr().out.strip() == str(out)
+    assert out.read_bytes()[4:8] == b"ftyp"
+    assert _frames(out) in (None, T_LONG)
+    assert [p.name for p in tmp_path.iterdir()] == ["walk.mp4"]
+
+
+def test_cli_mp4_failing_ffmpeg_is_a_clear_error(run_dir, cli, tmp_path, capsys, monkeypatch):
+    import shutil
+
+    if not os.access("/bin/false", os.X_OK):
+        pytest.skip("no /bin/false to stand in for a broken ffmpeg")
+    monkeypatch.setattr(shutil, "which", lambda name: "/bin/false")
+    assert cli(["--workdir", str(run_dir), "--style", "Happy", "--curve", "line", "--out",
+                str(tmp_path / "a.mp4")]) == 2
+    assert re.search(r"error: .*a\.mp4: ffmpeg \(/bin/false\) failed with exit status 1", capsys.readouterr().err)
+    assert not list(tmp_path.iterdir())
+
+
 def test_unwritable_output_leaves_nothing(run, tmp_path):
     state, meta, cfg, layout = run
     (tmp_path / "file").write_text("")

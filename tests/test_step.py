@@ -174,3 +174,30 @@ def test_fake_labels_and_z():
     _, z0 = step_lib.sample_labels_and_z(zeros_cfg, C, 4, jax.random.key(0))
     np.testing.assert_array_equal(np.asarray(z0), 0.0)
     chex.assert_shape(z0, (4, CFG.model.z_dim))
+
+
+def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
+    """model.output_prior = rest_and_curve: the same parameters as the paper's G, whose outputs
+    gain exactly the rest pose (pose head) and the input curve velocity (root head)."""
+    from motiongan_jax import curves, synthetic
+    from motiongan_jax.representation import layout_from_skeleton, rest_positions
+
+    layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
+    plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=4, w_dim=8, z_dim=8)))
+    prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior="rest_and_curve"))
+    plain = step_lib.init_state(plain_cfg, layout, C, jax.random.key(3))
+    prior = step_lib.init_state(prior_cfg, layout, C, jax.random.key(3))
+    assert _leaves_equal(plain.g_params, prior.g_params)  # same parameters, same init
+    curve = _batch()["curve_BxTx3"]
+    labels = jnp.array([0, 2], jnp.int32)
+    v0, p0 = step_lib.generator_apply(plain, curves.velocity(curve), labels)
+    v1, p1 = step_lib.generator_apply(prior, curves.velocity(curve), labels)
+    rest_R = rest_positions(layout)[1:].reshape(-1)
+    chex.assert_shape(p1, (B, T, layout.num_rows))
+    np.testing.assert_allclose(np.asarray(p1 - p0), np.broadcast_to(rest_R, p1.shape), atol=1e-5)
+    np.testing.assert_allclose(np.asarray(v1 - v0), np.asarray(curves.velocity(curve)), atol=1e-6)
+    # the prior's bone lengths at the rest pose are the skeleton's
+    bones = np.linalg.norm(np.diff(rest_positions(layout)[np.asarray(layout.bone_pairs)], axis=1)[:, 0], axis=-1)
+    np.testing.assert_allclose(bones, layout.bone_lengths_m, rtol=1e-6)
+    with pytest.raises(ValueError, match="output_prior"):
+        validate(dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior="mean")))

@@ -29,6 +29,11 @@ works on exactly 3J rows and c_traj's kernel is kt × 3J. Joint k ≥ 1 still ow
 its position in the row layout gives it in the paper's grouping. For J = 27 the crop is the
 identity and the network is the paper's. J > 27 would need another width stage: rejected.
 
+Output prior (model.output_prior = "rest_and_curve", small configs only; off in the paper's G):
+the pose head adds the skeleton's rest pose (`rest_pose_R`, metres) and the root-velocity head
+adds the input curve velocity. The parameters are the same; G starts as a rest-pose skeleton
+gliding along the curve instead of a collapsed one standing still.
+
 Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
 """
@@ -76,6 +81,8 @@ class Generator(nnx.Module):
         num_styles: int,
         latent_init: str = "paper",
         length_unit: float = 1.0,
+        rest_pose_R: tuple[float, ...] | None = None,
+        residual_root: bool = False,
         rngs: nnx.Rngs,
     ):
         if not 1 <= num_joints <= MAX_JOINTS:
@@ -88,6 +95,11 @@ class Generator(nnx.Module):
         self.length_unit = float(length_unit)
         self.w_dim = w_dim
         self.z_dim = z_dim
+        if rest_pose_R is not None and len(rest_pose_R) != self.num_rows:
+            raise ValueError(f"rest_pose_R has {len(rest_pose_R)} rows, G makes {self.num_rows}")
+        # a tuple of floats: static (part of the graph definition), not a parameter
+        self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
+        self.residual_root = bool(residual_root)
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
@@ -148,4 +160,8 @@ class Generator(nnx.Module):
 
         root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :] * self.length_unit
         pose_BxTxR = self.dc0_0(d0)[..., 0] * self.length_unit
+        if self.residual_root:
+            root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
+        if self.rest_pose_R is not None:
+            pose_BxTxR = pose_BxTxR + jnp.asarray(self.rest_pose_R, pose_BxTxR.dtype)
         return root_vel_BxTx3, pose_BxTxR

@@ -1,0 +1,564 @@
+"""The evaluation protocol (../shared/spec/evaluation.md) as one driver: curves, generation,
+every metric for generated and real held-out data side by side, and the reports.
+
+Conventions. Generated clips are placed by `generate.generate_motion` (root integrated from the
+curve start, feet put on the floor by a percentile shift); real held-out windows get the same
+floor shift, so ground-penetration figures compare like with like. Feet are the two toe joints
+(`foot_joints`). Generated motion is cut into evaluator windows of the training length T.
+Every (curve × style) pair gets K noise draws per seed; statistics are averaged per seed, and the
+report gives mean ± 95% CI over seeds (`metrics.mean_ci95`). Real data have no seeds: one value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from motiongan_jax import analysis, curves, evaluator, generate, metrics
+from motiongan_jax import step as step_lib
+from motiongan_jax.representation import from_rows, rest_positions
+
+TURNING_DEG = 45.0  # a held-out path whose heading changes more than this is "turning"
+PENETRATION_TOLERANCE_M = 0.02
+
+
+class EvaluationError(ValueError):
+    pass
+
+
+@dataclasses.dataclass(frozen=True)
+class EvalCurve:
+    name: str
+    kind: str  # heldout_straight, heldout_turning, cmu, synthetic
+    curve_Lx3: np.ndarray  # metres, y = 0, starts at the origin
+    source: str
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    seeds: tuple[int, ...] = (0, 1, 2)
+    k: int = 3  # noise draws per (curve, style)
+    windows_per_curve: int = 4  # curve length L = this × T
+    max_heldout_curves: int = 12
+    max_cmu_curves: int = 6
+    interp_steps: int = 5
+    search_clips: int = 1  # per style
+    search_steps: int = 200
+    w_samples: int = 10
+
+
+# ---------------------------------------------------------------------------------------------
+# Feet and floor
+# ---------------------------------------------------------------------------------------------
+
+
+def foot_joints(layout) -> tuple[int, int]:
+    """The two contact joints: the toe joints by name (not end sites), else the lowest rest-pose
+    joint on each side of the body."""
+    names = [n.lower() for n in layout.joint_names]
+    toes = [i for i, n in enumerate(names) if "toe" in n and "end" not in n]
+    if len(toes) == 2:
+        return toes[0], toes[1]
+    if layout.rest_offsets_m is None:
+        raise EvaluationError(f"cannot find the feet of joints {layout.joint_names}")
+    pos = rest_positions(layout)
+    left = [i for i in range(len(pos)) if pos[i, 0] > 0]
+    right = [i for i in range(len(pos)) if pos[i, 0] < 0]
+    if not left or not right:
+        raise EvaluationError(f"cannot find two feet in joints {layout.joint_names}")
+    return min(left, key=lambda i: pos[i, 1]), min(right, key=lambda i: pos[i, 1])
+
+
+def _heading_change_deg(curve_Lx3) -> float:
+    d = np.diff(curve_Lx3[:, [0, 2]], axis=0)
+    d = d[np.linalg.norm(d, axis=1) > 1e-9]
+    if len(d) < 2:
+        return 0.0
+    ang = np.unwrap(np.arctan2(d[:, 0], d[:, 1]))
+    return float(np.degrees(ang.max() - ang.min()))
+
+
+# ---------------------------------------------------------------------------------------------
+# Curves
+# ---------------------------------------------------------------------------------------------
+
+
+def heldout_curves(val_clips, cfg, L: int, max_curves: int) -> list[EvalCurve]:
+    """The noise-free training curve of each held-out clip's first L-sample stretch (fewer
+    samples, a multiple of T, if the clip is shorter), round-robin over styles."""
+    T, step = cfg.data.window_T, cfg.data.frame_step
+    by_style: dict[str, list] = {}
+    for clip in val_clips:
+        by_style.setdefault(clip.label.style, []).append(clip)
+    order = []
+    while any(by_style.values()):
+        for s in sorted(by_style):
+            if by_style[s]:
+                order.append(by_style[s].pop(0))
+    out = []
+    for clip in order:
+        F = len(clip.root_Fx3)
+        n = min(L, ((F - 1) // step + 1) // T * T)
+        if n < T:
+            continue
+        mw = analysis.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=n, frame_step=step,
+                                        interval=cfg.data.control_point_interval, max_windows=1)
+        c = np.asarray(mw.curve_NxTx3[0], np.float64)
+        c = c - c[0] * np.array([1.0, 0.0, 1.0])
+        kind = "heldout_turning" if _heading_change_deg(c) > TURNING_DEG else "heldout_straight"
+        out.append(EvalCurve(Path(clip.source).stem, kind, c.astype(np.float32), clip.source))
+        if len(out) >= max_curves:
+            break
+    return out
+
+
+def file_curves(paths: Sequence[Path], sample_rate: float, L: int, T: int, control_seconds: float,
+                log=None) -> list[EvalCurve]:
+    """Root paths of BVH files from another session or lab (their own speed), trimmed to L."""
+    out = []
+    for p in paths:
+        try:
+            c = generate.load_curve(str(p), control_seconds=control_seconds)
+            arr = generate.prepare_curve(c, sample_rate)
+        except (ValueError, OSError) as err:
+            if log:
+                log(f"skipping curve {p}: {err}")
+            continue
+        n = min(L, len(arr) // T * T)
+        if n < T:
+            continue
+        arr = arr[:n] - arr[0] * np.array([1.0, 0.0, 1.0], np.float32)
+        out.append(EvalCurve(Path(p).stem, "cmu", arr.astype(np.float32), str(p)))
+    return out
+
+
+def shape_curves(sample_rate: float, speed: float, L: int, T: int,
+                 shapes: Sequence[str] = curves.SHAPES) -> list[EvalCurve]:
+    """The synthetic shapes (line, circle, S-curve, figure-8, 90° corner) walked at `speed`."""
+    out = []
+    length = L * speed / sample_rate
+    for name in shapes:
+        kw = {"length": length} if name in ("line", "corner") else {"scale": max(length / (2 * math.pi), 1.0)}
+        if name == "figure8":
+            kw = {"scale": max(length / (4 * math.pi), 1.0)}
+        arr = generate.prepare_curve(generate.load_curve(name, **kw), sample_rate, speed)
+        n = min(L, len(arr) // T * T)
+        if n < T:
+            continue
+        arr = arr[:n] - arr[0] * np.array([1.0, 0.0, 1.0], np.float32)
+        out.append(EvalCurve(name, "synthetic", arr.astype(np.float32), f"shape:{name}"))
+    return out
+
+
+def median_speed(clips, fps: float) -> float:
+    """Median walking speed (m/s) of clips: floor path length over duration."""
+    s = []
+    for c in clips:
+        xz = np.asarray(c.root_Fx3)[:, [0, 2]]
+        if len(xz) > 1:
+            s.append(np.sum(np.linalg.norm(np.diff(xz, axis=0), axis=1)) / ((len(xz) - 1) / fps))
+    return float(np.median(s)) if s else generate.DEFAULT_SPEED_M_PER_S
+
+
+# ---------------------------------------------------------------------------------------------
+# Per-clip motion metrics (generated and real alike)
+# ---------------------------------------------------------------------------------------------
+
+
+def motion_metrics(joints_LxJx3, curve_Lx3, layout, feet, fps: float, contact_height: float) -> dict:
+    """Trajectory (when a curve is given), skating, skeleton and smoothness of one clip."""
+    toes = joints_LxJx3[:, list(feet)]
+    out = {
+        "foot_skate_original_m": metrics.foot_skate_original(toes),
+        "skate_ratio": metrics.skate_ratio(toes, fps, contact_height),
+        "bone_length_error": metrics.bone_length_error(joints_LxJx3, np.asarray(layout.bone_pairs),
+                                                       np.asarray(layout.bone_lengths_m)),
+        "ground_penetration": metrics.ground_penetration(toes[..., 1], PENETRATION_TOLERANCE_M),
+        "jerk_mps3": metrics.mean_jerk(joints_LxJx3, fps),
+    }
+    if curve_Lx3 is not None:
+        root = joints_LxJx3[:, 0]
+        out.update({
+            "traj_error_original_m": metrics.trajectory_error_original(root, curve_Lx3),
+            "traj_error_symmetric_m": metrics.trajectory_error_symmetric(root, curve_Lx3),
+            "endpoint_error_m": metrics.endpoint_error(root, curve_Lx3),
+            "path_length_ratio": metrics.path_length_ratio(root, curve_Lx3),
+        })
+    return out
+
+
+def cut_windows(root_BxLx3, pose_BxLxR, T: int):
+    B, L, _ = root_BxLx3.shape
+    n = L // T
+    r = root_BxLx3[:, : n * T].reshape(B * n, T, 3)
+    p = pose_BxLxR[:, : n * T].reshape(B * n, T, -1)
+    return r, p, n
+
+
+# ---------------------------------------------------------------------------------------------
+# The driver
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class Context:
+    state: object
+    meta: dict
+    cfg: object
+    layout: object
+    ev: evaluator.Evaluator
+    style_names: tuple[str, ...]
+    val_clips: list
+    sample_rate: float
+    feet: tuple[int, int]
+    curves_: list[EvalCurve]
+    settings: Settings
+
+
+def _real_block(ctx: Context) -> dict:
+    """Every per-clip metric and evaluator score on real held-out data."""
+    T, step = ctx.cfg.data.window_T, ctx.cfg.data.frame_step
+    root, pose, labels, _ = evaluator.real_windows(ctx.val_clips, ctx.style_names, T, step)
+    if len(root) < 2:
+        raise EvaluationError("fewer than two real held-out windows: cannot evaluate")
+    logits, feats = evaluator.classify(ctx.ev, root, pose)
+    joints = np.asarray(from_rows(root, pose, ctx.layout), np.float64)
+    shift = generate.floor_shift(joints)
+    joints[..., 1] += shift[:, None, None]
+    heights = joints[:, :, list(ctx.feet), 1].reshape(-1)
+    contact = metrics.contact_height_threshold(heights)
+    per = []
+    for i in range(len(joints)):
+        per.append(motion_metrics(joints[i], None, ctx.layout, ctx.feet, ctx.sample_rate, contact))
+    # trajectory of real motion against its own (noise-free) curve, on the held-out curves
+    traj = []
+    for c in ctx.curves_:
+        if not c.kind.startswith("heldout"):
+            continue
+        clip = next(cl for cl in ctx.val_clips if cl.source == c.source)
+        n = len(c.curve_Lx3)
+        r = np.asarray(clip.root_Fx3, np.float64)[: (n - 1) * step + 1: step]
+        r = r - r[0] * np.array([1.0, 0.0, 1.0])
+        traj.append({"traj_error_original_m": metrics.trajectory_error_original(r, c.curve_Lx3),
+                     "traj_error_symmetric_m": metrics.trajectory_error_symmetric(r, c.curve_Lx3),
+                     "endpoint_error_m": metrics.endpoint_error(r, c.curve_Lx3),
+                     "path_length_ratio": metrics.path_length_ratio(r, c.curve_Lx3)})
+    return {"logits": logits, "feats": feats, "labels": labels, "per_window": per, "traj": traj,
+            "contact_height_m": contact, "joints": joints}
+
+
+def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
+    """Generation for every (curve × style × K) with one seed; per-clip metrics and scores."""
+    s = ctx.settings
+    C = len(ctx.style_names)
+    T = ctx.cfg.data.window_T
+    Z = step_lib.generator_z_dim(ctx.state)
+    labels = np.repeat(np.arange(C, dtype=np.int32), s.k)
+    key = jax.random.key(seed)
+    rows, win_logits, win_feats, win_labels, mm_groups = [], [], [], [], []
+    for ci, c in enumerate(ctx.curves_):
+        z = jax.random.normal(jax.random.fold_in(key, ci), (C * s.k, Z), jnp.float32)
+        w = analysis._latent_w(analysis._g_only(ctx.state), jnp.asarray(labels), z)
+        gen = generate.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, np.asarray(w))
+        root = gen.positions[:, :, 0]
+        r, p, n = cut_windows(root, gen.pose, T)
+        logits, feats = evaluator.classify(ctx.ev, r, p)
+        win_logits.append(logits)
+        win_feats.append(feats)
+        win_labels.append(np.repeat(labels, n))
+        # multimodality: the K draws of one (curve, style), each clip's mean window feature
+        clip_feats = feats.reshape(C * s.k, n, -1).mean(1).reshape(C, s.k, -1)
+        mm_groups.append(clip_feats)
+        for b in range(C * s.k):
+            m = motion_metrics(gen.positions[b], c.curve_Lx3, ctx.layout, ctx.feet, ctx.sample_rate, contact)
+            rows.append({"curve": c.name, "kind": c.kind, "style": int(labels[b]), **m})
+    return {"rows": rows, "logits": np.concatenate(win_logits), "feats": np.concatenate(win_feats),
+            "labels": np.concatenate(win_labels), "mm": np.concatenate(mm_groups)}
+
+
+def _style_space_block(ctx: Context, seed: int) -> dict:
+    """w-space metrics with one seed: nearest-centroid accuracy, PCA, interpolation, arithmetic."""
+    s = ctx.settings
+    C = len(ctx.style_names)
+    T = ctx.cfg.data.window_T
+    key = jax.random.key(10_000 + seed)
+    k_a, k_b = jax.random.split(key)
+    fit = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_a)
+    test = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_b)
+    X, y = test.flat_samples
+    cents = np.asarray(fit.centroids_CxW)
+    nc_acc = metrics.nearest_centroid_accuracy(np.asarray(X), np.asarray(y), cents)
+    ev_ratio = metrics.explained_variance(np.asarray(fit.flat_samples[0]))
+    # a straight line of L samples at the held-out median spacing, for interpolation/arithmetic
+    line = next((c for c in ctx.curves_ if c.name == "line"), ctx.curves_[0]).curve_Lx3
+    out = {"nearest_centroid_accuracy": nc_acc, "pca_explained_2": float(np.sum(ev_ratio[:2])),
+           "pca_explained": ev_ratio[:5].tolist()}
+    if C >= 2:
+        alphas = np.linspace(0.0, 1.0, s.interp_steps)
+        rhos = []
+        rng = np.random.default_rng(seed)
+        pairs = [(a, (a + 1 + int(rng.integers(C - 1))) % C) for a in range(C)]
+        for a, b in pairs:
+            w = np.stack([(1 - t) * cents[a] + t * cents[b] for t in alphas])
+            gen = generate.generate_motion(ctx.state, ctx.layout, line, w)
+            r, p, n = cut_windows(gen.positions[:, :, 0], gen.pose, T)
+            logits, _ = evaluator.classify(ctx.ev, r, p)
+            pb = np.asarray(jax.nn.softmax(logits, -1))[:, b].reshape(len(alphas), n).mean(1)
+            rhos.append(metrics.interpolation_monotonicity(alphas, pb))
+        out["interp_monotonicity"] = float(np.nanmean(rhos)) if np.isfinite(rhos).any() else float("nan")
+    if C >= 3:
+        triples = [(a, (a + 1) % C, (a + 2) % C) for a in range(C)]
+        w = np.stack([cents[a] - cents[b] + cents[c] for a, b, c in triples])
+        gen = generate.generate_motion(ctx.state, ctx.layout, line, w)
+        r, p, n = cut_windows(gen.positions[:, :, 0], gen.pose, T)
+        logits, _ = evaluator.classify(ctx.ev, r, p)
+        pred = np.argmax(logits, -1).reshape(len(triples), n)
+        ok = [np.mean((pred[i] == a) | (pred[i] == c)) for i, (a, b, c) in enumerate(triples)]
+        out["arithmetic_agreement"] = float(np.mean(ok))
+        out["arithmetic_chance"] = 2.0 / C
+    return out
+
+
+def _search_block(ctx: Context) -> dict:
+    """Style search on held-out real clips: is the recovered w nearest its true style's centroid?"""
+    s = ctx.settings
+    if s.search_clips < 1:
+        return {}
+    T, step = ctx.cfg.data.window_T, ctx.cfg.data.frame_step
+    codes = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples)
+    taken: dict[str, int] = {}
+    hits, losses = [], []
+    for clip in ctx.val_clips:
+        if taken.get(clip.label.style, 0) >= s.search_clips:
+            continue
+        try:
+            target = analysis.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=T, frame_step=step,
+                                                interval=ctx.cfg.data.control_point_interval, max_windows=2)
+        except analysis.AnalysisError:
+            continue
+        taken[clip.label.style] = taken.get(clip.label.style, 0) + 1
+        res = analysis.search_motion(ctx.state, codes, target, steps=s.search_steps,
+                                     length_unit=ctx.cfg.model.length_unit)
+        hits.append(res["nearest"][0][0] == clip.label.style)
+        losses.append(res["result"].loss)
+    if not hits:
+        return {}
+    return {"search_recovery": float(np.mean(hits)), "search_clips": len(hits),
+            "search_final_loss": float(np.mean(losses))}
+
+
+GEN_KEYS = ("traj_error_original_m", "traj_error_symmetric_m", "endpoint_error_m", "path_length_ratio",
+            "foot_skate_original_m", "skate_ratio", "bone_length_error", "ground_penetration", "jerk_mps3")
+
+
+def _mean_key(rows, key):
+    v = [r[key] for r in rows if key in r and np.isfinite(r[key])]
+    return float(np.mean(v)) if v else float("nan")
+
+
+def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
+    s = ctx.settings
+    C = len(ctx.style_names)
+    log(f"real held-out data: {len(ctx.val_clips)} clips")
+    real = _real_block(ctx)
+    real_sra = metrics.style_recognition(real["logits"], real["labels"])
+    real_jerk = _mean_key(real["per_window"], "jerk_mps3")
+    # FMD reference level: two halves of the real held-out windows (alternate windows)
+    half_a, half_b = real["feats"][0::2], real["feats"][1::2]
+    real_row = {
+        "sra_top1": real_sra["top1"], "sra_top3": real_sra["top3"],
+        "fmd": metrics.frechet_distance(half_a, half_b) if min(len(half_a), len(half_b)) > 1 else float("nan"),
+        "diversity": metrics.diversity(real["feats"], 1000, seed=0),
+        **{k: _mean_key(real["traj"] if k.startswith(("traj", "endpoint", "path")) else real["per_window"], k)
+           for k in GEN_KEYS},
+    }
+    real_row["jerk_ratio"] = 1.0
+    real_per_style = {}
+    for c in range(C):
+        sel = real["labels"] == c
+        rows = [r for r, m in zip(real["per_window"], sel) if m]
+        real_per_style[ctx.style_names[c]] = {
+            "windows": int(sel.sum()),
+            "sra_top1": float(np.mean(np.argmax(real["logits"][sel], -1) == c)) if sel.any() else float("nan"),
+            **{k: _mean_key(rows, k) for k in ("foot_skate_original_m", "skate_ratio", "bone_length_error")}}
+
+    per_seed, per_seed_style, confusions = [], [], []
+    for seed in s.seeds:
+        log(f"seed {seed}: generating {len(ctx.curves_)} curves x {C} styles x {s.k} draws")
+        g = _generate_block(ctx, seed, real["contact_height_m"])
+        sra = metrics.style_recognition(g["logits"], g["labels"])
+        confusions.append(sra["confusion_CxC"])
+        row = {"sra_top1": sra["top1"], "sra_top3": sra["top3"],
+               "fmd": metrics.frechet_distance(real["feats"], g["feats"]),
+               "diversity": metrics.diversity(g["feats"], 1000, seed=seed),
+               "multimodality": metrics.multimodality(g["mm"].reshape(-1, s.k, g["mm"].shape[-1])),
+               **{k: _mean_key(g["rows"], k) for k in GEN_KEYS}}
+        row["jerk_ratio"] = row["jerk_mps3"] / real_jerk
+        for kind in sorted({c.kind for c in ctx.curves_}):
+            rows = [r for r in g["rows"] if r["kind"] == kind]
+            row[f"traj_error_original_m[{kind}]"] = _mean_key(rows, "traj_error_original_m")
+            row[f"traj_error_symmetric_m[{kind}]"] = _mean_key(rows, "traj_error_symmetric_m")
+        log(f"seed {seed}: style space")
+        row.update(_style_space_block(ctx, seed))
+        per_seed.append(row)
+        st = {}
+        for c in range(C):
+            sel = g["labels"] == c
+            rows = [r for r in g["rows"] if r["style"] == c]
+            rs = real["labels"] == c
+            st[ctx.style_names[c]] = {
+                "sra_top1": float(np.mean(np.argmax(g["logits"][sel], -1) == c)),
+                "fmd": (metrics.frechet_distance(real["feats"][rs], g["feats"][sel])
+                        if rs.sum() > 1 and sel.sum() > 1 else float("nan")),
+                **{k: _mean_key(rows, k) for k in ("traj_error_original_m", "foot_skate_original_m",
+                                                  "skate_ratio", "bone_length_error")}}
+        per_seed_style.append(st)
+    log("style search on held-out clips")
+    search = _search_block(ctx)
+
+    keys = list(per_seed[0])
+    generated = {k: _ci([r.get(k, float("nan")) for r in per_seed]) for k in keys}
+    per_style = {}
+    for name in ctx.style_names:
+        per_style[name] = {"generated": {k: _ci([st[name][k] for st in per_seed_style]) for k in per_seed_style[0][name]},
+                           "real": real_per_style[name]}
+    return {
+        "generated": generated,
+        "real": real_row,
+        "per_style": per_style,
+        "search": search,
+        "confusion_generated": np.sum(confusions, axis=0).tolist(),
+        "confusion_real": real_sra["confusion_CxC"].tolist(),
+        "contact_height_m": real["contact_height_m"],
+        "evaluator_real_heldout": ctx.ev.meta.get("real_heldout"),
+        "num_generated_clips_per_seed": len(ctx.curves_) * C * s.k,
+        "num_real_windows": int(len(real["labels"])),
+    }
+
+
+def _ci(values) -> dict:
+    vals = np.asarray(values, np.float64)
+    if not np.isfinite(vals).any():
+        return {"mean": float("nan"), "ci95": float("nan"), "per_seed": vals.tolist()}
+    m, h = metrics.mean_ci95(vals)
+    return {"mean": m, "ci95": h, "per_seed": vals.tolist()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Reports
+# ---------------------------------------------------------------------------------------------
+
+ROWS = [
+    ("sra_top1", "style accuracy top-1 (evaluator)"),
+    ("sra_top3", "style accuracy top-3"),
+    ("fmd", "Fréchet motion distance (real: two halves of the held-out windows)"),
+    ("diversity", "diversity (feature distance)"),
+    ("multimodality", "multimodality (across z)"),
+    ("traj_error_original_m", "trajectory error, original (m)"),
+    ("traj_error_symmetric_m", "trajectory error, symmetric arc length (m)"),
+    ("endpoint_error_m", "end-point error (m)"),
+    ("path_length_ratio", "path length ratio"),
+    ("foot_skate_original_m", "foot skate, original (m per sample)"),
+    ("skate_ratio", "skating ratio (contacts faster than 0.5 m/s)"),
+    ("bone_length_error", "bone-length error (relative)"),
+    ("ground_penetration", f"frames with a toe > {PENETRATION_TOLERANCE_M * 100:.0f} cm below the floor"),
+    ("jerk_ratio", "jerk ratio (generated / real)"),
+    ("nearest_centroid_accuracy", "w nearest-centroid accuracy"),
+    ("pca_explained_2", "w PCA: variance explained by 2 components"),
+    ("interp_monotonicity", "interpolation monotonicity (Spearman)"),
+    ("arithmetic_agreement", "arithmetic A-B+C classified as A or C"),
+]
+
+
+def _fmt(x, digits=3) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    return f"{x:.{digits}g}" if abs(x) >= 1e-3 or x == 0 else f"{x:.2e}"
+
+
+def markdown(report: dict) -> str:
+    h = report["header"]
+    r = report["results"]
+    lines = [f"# Evaluation: {h['config_name']} (step {h['checkpoint_step']})", "",
+             f"- workdir: `{h['workdir']}`", f"- config hash: `{h['config_hash']}`",
+             f"- checkpoint step: {h['checkpoint_step']}",
+             f"- evaluator: `{h['evaluator']}`, checksum `{h['evaluator_checksum']}`",
+             f"- evaluator accuracy on real held-out windows: {_fmt((h.get('evaluator_real_heldout') or {}).get('top1'))} "
+             f"(chance {_fmt(1.0 / len(h['style_names']))})",
+             f"- seeds {h['settings']['seeds']}, K = {h['settings']['k']} noise draws per (curve, style), "
+             f"{r['num_generated_clips_per_seed']} generated clips per seed, {r['num_real_windows']} real held-out windows",
+             f"- curves: " + ", ".join(f"{k} {v}" for k, v in h["curve_counts"].items()),
+             f"- files: training {len(h['train_files'])}, held-out {len(h['val_files'])} (lists in report.json)", "",
+             "## Metrics (generated: mean ± 95% CI over seeds; real held-out data)", "",
+             "| metric | generated | real |", "|---|---|---|"]
+    for key, label in ROWS:
+        g = r["generated"].get(key)
+        real = r["real"].get(key)
+        gs = "—" if g is None else f"{_fmt(g['mean'])} ± {_fmt(g['ci95'])}"
+        lines.append(f"| {label} | {gs} | {_fmt(real)} |")
+    kinds = sorted(k[len("traj_error_original_m["):-1] for k in r["generated"] if k.startswith("traj_error_original_m["))
+    if kinds:
+        lines += ["", "Trajectory error by curve kind (m, generated):", "",
+                  "| curve kind | original | symmetric |", "|---|---|---|"]
+        for kind in kinds:
+            a, b = r["generated"][f"traj_error_original_m[{kind}]"], r["generated"][f"traj_error_symmetric_m[{kind}]"]
+            lines.append(f"| {kind} | {_fmt(a['mean'])} ± {_fmt(a['ci95'])} | {_fmt(b['mean'])} ± {_fmt(b['ci95'])} |")
+    if r.get("search"):
+        s = r["search"]
+        lines += ["", f"Style search: the recovered w's nearest centroid is the clip's true style for "
+                      f"{_fmt(s['search_recovery'])} of {s['search_clips']} held-out clips (final loss {_fmt(s['search_final_loss'])})."]
+    lines += ["", "## Per style", "", "| style | SRA gen | SRA real | FMD gen | traj. orig. (m) | skate gen | skate real | bone err gen |",
+              "|---|---|---|---|---|---|---|---|"]
+    for name, v in r["per_style"].items():
+        g, re_ = v["generated"], v["real"]
+        lines.append(f"| {name} | {_fmt(g['sra_top1']['mean'])} | {_fmt(re_['sra_top1'])} | {_fmt(g['fmd']['mean'])} | "
+                     f"{_fmt(g['traj_error_original_m']['mean'])} | {_fmt(g['foot_skate_original_m']['mean'])} | "
+                     f"{_fmt(re_['foot_skate_original_m'])} | {_fmt(g['bone_length_error']['mean'])} |")
+    lines += ["", "Plots: `confusion.png` (generated and real), `pca_w.png`.", ""]
+    return "\n".join(lines)
+
+
+def plot_confusion(conf_gen, conf_real, style_names, path) -> Path:
+    from motiongan_jax import viz
+
+    plt = viz._pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5.5))
+    for ax, conf, title in ((axes[0], conf_gen, "generated"), (axes[1], conf_real, "real held-out")):
+        m = np.asarray(conf, np.float64)
+        m = m / np.maximum(m.sum(1, keepdims=True), 1)
+        im = ax.imshow(m, vmin=0, vmax=1, cmap="Blues")
+        ax.set_xticks(range(len(style_names)), style_names, rotation=90, fontsize=7)
+        ax.set_yticks(range(len(style_names)), style_names, fontsize=7)
+        ax.set_xlabel("predicted")
+        ax.set_ylabel("requested" if title == "generated" else "true")
+        ax.set_title(f"evaluator confusion, {title}")
+    fig.colorbar(im, ax=axes, shrink=0.8)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def to_jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): to_jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [to_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return to_jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def dumps(report: dict) -> str:
+    return json.dumps(to_jsonable(report), indent=1) + "\n"
