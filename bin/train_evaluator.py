@@ -34,7 +34,6 @@ def main(argv=None) -> int:
     import dataclasses
 
     import jax
-    import numpy as np
 
     from motiongan_jax import data, evaluator, metrics
     from motiongan_jax.bvh import BVHError

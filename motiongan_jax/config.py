@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-LABEL_RULES = ("paper", "bandai", "cmu", "synthetic")
+LABEL_RULES = ("paper", "bandai", "bandai_session", "cmu", "synthetic")
 GAN_LOSSES = ("bce_prob", "bce_logit")
 
 

@@ -76,11 +76,14 @@ def label_from_filename(path: str | Path, rule: str) -> FileLabel | None:
         style, rest = stem.split("_", 1)
         digits = re.findall(r"\d+", rest)
         return FileLabel(style=style, trial=int(digits[-1]) if digits else 0)
-    if rule == "bandai":
+    if rule in ("bandai", "bandai_session"):
         m = _BANDAI.match(stem)
         if not m:
             return None
-        return FileLabel(style=m.group(3), trial=int(m.group(4)), content=m.group(2))
+        # bandai_session keeps the recording sessions apart ("d1_active" and "d2_active" are two
+        # styles), like the paper's two actors
+        style = m.group(3) if rule == "bandai" else f"d{int(m.group(1))}_{m.group(3)}"
+        return FileLabel(style=style, trial=int(m.group(4)), content=m.group(2))
     if rule == "cmu":
         m = _CMU.match(stem)
         if not m:
@@ -266,6 +269,20 @@ def load_dataset(cfg: DataConfig, *, use_cache: bool = True, log=None) -> Datase
     val = [preprocess_clip(p, lab, units, cfg.start_offset, use_cache) for p, lab in val_e]
     if not train:
         raise DataError(f"no training clips under {data_dir} after the validation split")
+    # A clip no longer than one window gives no training window and no evaluation window; such
+    # clips are dropped before the skeletons are compared (two 20-31-frame Bandai dataset-1 clips
+    # also carry a different End Site layout).
+    short = [c for c in train + val if len(c.root_Fx3) <= cfg.frame_nums]
+    if short:
+        names = ", ".join(Path(c.source).name for c in short[:5])
+        (log or (lambda m: print(m, file=sys.stderr)))(
+            f"skipping {len(short)} clip(s) no longer than data.frame_nums = {cfg.frame_nums} frames: {names}")
+        longest = max(len(c.root_Fx3) for c in train)
+        train = [c for c in train if len(c.root_Fx3) > cfg.frame_nums]
+        val = [c for c in val if len(c.root_Fx3) > cfg.frame_nums]
+        if not train:
+            raise DataError(f"no training clip is longer than data.frame_nums = {cfg.frame_nums} frames "
+                            f"(longest: {longest}); lower frame_nums or frame_step")
     layout = _check_layouts(train + val)
     fps_set = {round(c.fps, 3) for c in train + val}
     if len(fps_set) != 1:

@@ -494,7 +494,7 @@ def markdown(report: dict) -> str:
              f"(chance {_fmt(1.0 / len(h['style_names']))})",
              f"- seeds {h['settings']['seeds']}, K = {h['settings']['k']} noise draws per (curve, style), "
              f"{r['num_generated_clips_per_seed']} generated clips per seed, {r['num_real_windows']} real held-out windows",
-             f"- curves: " + ", ".join(f"{k} {v}" for k, v in h["curve_counts"].items()),
+             "- curves: " + ", ".join(f"{k} {v}" for k, v in h["curve_counts"].items()),
              f"- files: training {len(h['train_files'])}, held-out {len(h['val_files'])} (lists in report.json)", "",
              "## Metrics (generated: mean ± 95% CI over seeds; real held-out data)", "",
              "| metric | generated | real |", "|---|---|---|"]

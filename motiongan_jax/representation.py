@@ -23,7 +23,7 @@ import numpy as np
 from motiongan_jax.bvh import Skeleton
 
 # Metres per file unit, by source. CMU's unit is the paper's: 1 unit = 0.056444 m.
-UNITS_TO_M = {"cmu": 0.056444, "paper": 0.056444, "synthetic": 0.056444, "bandai": 0.01}
+UNITS_TO_M = {"cmu": 0.056444, "paper": 0.056444, "synthetic": 0.056444, "bandai": 0.01, "bandai_session": 0.01}
 
 _ZERO_LENGTH_SQ = 1e-8
 

@@ -1,4 +1,7 @@
 import dataclasses
+import re
+from pathlib import Path
+
 
 import chex
 import jax
@@ -21,6 +24,8 @@ from motiongan_jax.representation import RowLayout
     ("OldMan_walk_12.bvh", "paper", "OldMan", 12),
     ("dataset-2_walk-turn-left_active_007.bvh", "bandai", "active", 7),
     ("dataset-1_walk_not-confident_002.bvh", "bandai", "not-confident", 2),
+    ("dataset-1_walk_not-confident_002.bvh", "bandai_session", "d1_not-confident", 2),
+    ("dataset-2_walk-turn-left_active_007.bvh", "bandai_session", "d2_active", 7),
     ("137_04.bvh", "cmu", "Cat", 4),
     ("142_03.bvh", "cmu", "Clumsy", 3),
     ("142_22.bvh", "cmu", "Sneaky", 22),
@@ -211,10 +216,13 @@ def test_bandai_dataset_end_to_end(shared_data, repo):
 
     cfg = load_config(repo / "configs" / "bandai.py", check=False)
     cfg = override(cfg, [f"data.data_dir={shared_data / 'bandai' / 'dataset-2'}"]).data
-    ds = data.load_dataset(cfg)
+    messages = []
+    ds = data.load_dataset(cfg, log=messages.append)
     assert ds.style_names == ("active", "elderly", "exhausted", "feminine", "masculine", "normal", "youthful")
     assert ds.layout.num_rows == 60 and ds.fps == pytest.approx(30.0, rel=1e-4)
-    assert len(ds.train) + len(ds.val) == 522
+    # 522 files; those no longer than one window (128 frames) give no window and are dropped
+    skipped = int(re.search(r"skipping (\d+) clip", " ".join(messages)).group(1)) if messages else 0
+    assert len(ds.train) + len(ds.val) + skipped == 522 and len(ds.train) + len(ds.val) > 400
     assert all(c.label.trial % 4 == 0 for c in ds.val) and all(c.label.trial % 4 for c in ds.train)
     arrays = build_arrays(ds.train, ds.style_names, cfg)
     batch = jax.jit(make_sample_batch(cfg, 8))(arrays, jax.random.key(0), 0)
@@ -224,3 +232,22 @@ def test_bandai_dataset_end_to_end(shared_data, repo):
     speed = np.linalg.norm(np.diff(np.asarray(batch["root_BxTx3"])[..., [0, 2]], axis=1), axis=-1).mean()
     assert 0.02 < speed < 0.2  # metres per 15 Hz sample
     assert 0.7 < float(np.median(batch["root_BxTx3"][..., 1])) < 1.1
+
+
+def test_bandai_two_sessions_keep_their_styles_apart(shared_data, repo):
+    """dataset-1 + dataset-2 under bandai_session: 15 + 7 = 22 labels; the two 20-31-frame
+    dataset-1 clips (too short for a window, and with other End Sites) are dropped, not fatal."""
+    from motiongan_jax.config import load_config, override
+
+    cfg = load_config(repo / "configs" / "bandai.py", check=False)
+    cfg = override(cfg, [f"data.data_dir={shared_data / 'bandai'}", "data.label_rule=bandai_session",
+                         "data.val_modulus=2"]).data
+    messages = []
+    ds = data.load_dataset(cfg, log=messages.append)
+    assert len(ds.style_names) == 22
+    assert sum(s.startswith("d1_") for s in ds.style_names) == 15 and "d2_elderly" in ds.style_names
+    assert any(m.startswith("skipping") for m in messages)
+    used = {Path(c.source).name for c in ds.train + ds.val}
+    assert "dataset-1_walk_normal_002.bvh" not in used and "dataset-1_walk-back_normal_001.bvh" not in used
+    assert 60 < sum(n.startswith("dataset-1") for n in used) <= 73
+    assert all(len(c.root_Fx3) > cfg.frame_nums for c in ds.train + ds.val)
