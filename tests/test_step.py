@@ -185,13 +185,15 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=4, w_dim=8, z_dim=8)))
     prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior="rest_and_curve"))
-    plain = step_lib.init_state(plain_cfg, layout, C, jax.random.key(3))
-    prior = step_lib.init_state(prior_cfg, layout, C, jax.random.key(3))
-    assert _leaves_equal(plain.g_params, prior.g_params)  # same parameters, same init
+    # the modules themselves (eager, no compile): same key, same parameters
+    rows = step_lib.output_prior_rows(prior_cfg.model, layout)
+    plain = step_lib._build_g(plain_cfg.model, layout.num_rel_joints, C, None, jax.random.key(3))
+    prior = step_lib._build_g(prior_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    assert _leaves_equal(nnx.state(plain, nnx.Param), nnx.state(prior, nnx.Param))
     curve = _batch()["curve_BxTx3"]
-    labels = jnp.array([0, 2], jnp.int32)
-    v0, p0 = step_lib.generator_apply(plain, curves.velocity(curve), labels)
-    v1, p1 = step_lib.generator_apply(prior, curves.velocity(curve), labels)
+    w = plain.style(jnp.array([0, 2], jnp.int32), jnp.zeros((B, 8)))
+    v0, p0 = plain(curves.velocity(curve), w)
+    v1, p1 = prior(curves.velocity(curve), w)
     rest_R = rest_positions(layout)[1:].reshape(-1)
     chex.assert_shape(p1, (B, T, layout.num_rows))
     np.testing.assert_allclose(np.asarray(p1 - p0), np.broadcast_to(rest_R, p1.shape), atol=1e-5)
