@@ -1,13 +1,17 @@
 #!/usr/bin/env python
 """Training-step benchmark (run by hand, never in CI). Prints medians.
 
-Times one jitted train_step (D update then G update) on synthetic batches of the right shapes:
-the paper's (B 24, T 128, CMU skeleton 27 joints -> 81 rows, 28 styles, top 64) and the cpu
-config's. Reports compile time, median seconds per step and the achieved GFLOP/s (XLA's own
-flop count of the compiled step). Reference PyTorch on this machine kind, 2 threads: median
-8.57 s per iteration at the paper's shapes (G forward 3.1 s, D update 0.24 s, G update 5.0 s).
+Times one jitted train_step (D update then G update, state donated) on synthetic batches of the
+right shapes: the paper's (B 24, T 128, CMU skeleton 27 joints -> 81 rows, 28 styles, top 64) and
+the cpu config's. Reports compile time, median wall and process-CPU seconds per step, the load
+average (the machine is shared: compare runs taken close together) and XLA's flop count of the
+compiled step. Reference PyTorch on this machine kind, 2 threads: median 8.57 s per iteration
+at the paper's shapes (G forward 3.1 s, D update 0.24 s, G update 5.0 s).
 
-  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,cpu] [--repeats 5]
+`--impl xla` times the straightforward convolutions (tile + concat skips, upsample then tconv,
+plain lax.conv), `--impl fast` (default) the rewrites of nn/conv.py and nn/generator.py.
+
+  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,cpu] [--impl fast,xla] [--repeats 5]
 """
 
 import argparse
@@ -21,13 +25,24 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
 
+from bench.timing import load  # noqa: E402
 from motiongan_jax import step as step_lib, synthetic  # noqa: E402
 from motiongan_jax.config import load_config, override  # noqa: E402
 from motiongan_jax.representation import layout_from_skeleton  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+REFERENCE_STEP_S = 8.57
+
+
+
+def paper_or_cpu(which: str):
+    """(cfg, layout, num_styles) of configs/<which>.py on the CMU skeleton, no data needed."""
+    cfg = load_config(CONFIGS / f"{which}.py", check=False)
+    cfg = override(cfg, ["data.data_dir=None", "data.label_rule=synthetic"])
+    layout = layout_from_skeleton(synthetic.cmu_skeleton(), 0.056444)
+    num_styles = 28 if which == "paper" else len(synthetic.STYLES)
+    return cfg, layout, num_styles
 
 
 def fake_batch(B, T, R, num_styles, key):
@@ -42,10 +57,9 @@ def fake_batch(B, T, R, num_styles, key):
     }
 
 
-def bench(name, cfg, num_styles, repeats):
-    layout = layout_from_skeleton(synthetic.cmu_skeleton(), 0.056444)
+def bench(name, cfg, layout, num_styles, repeats, impl):
     B, T = cfg.train.batch_size, cfg.data.window_T
-    state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0))
+    state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
     step_fn = jax.jit(step_lib.make_train_step(cfg, layout, num_styles), donate_argnums=0)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
     t0 = time.perf_counter()
@@ -54,36 +68,39 @@ def bench(name, cfg, num_styles, repeats):
     cost = compiled.cost_analysis()
     cost = cost[0] if isinstance(cost, (list, tuple)) else cost
     flops = float(cost.get("flops", float("nan"))) if cost else float("nan")
-    state, m = step_fn(state, batch, jax.random.key(3))  # warm-up
+    state, m = compiled(state, batch, jax.random.key(3))  # warm-up
     jax.block_until_ready(m)
-    times = []
+    times, cpu = [], []
     for i in range(repeats):
-        t0 = time.perf_counter()
-        state, m = step_fn(state, batch, jax.random.key(10 + i))
+        t0, c0 = time.perf_counter(), time.process_time()
+        state, m = compiled(state, batch, jax.random.key(10 + i))
         jax.block_until_ready(m)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     med = statistics.median(times)
-    print(f"{name}: B {B}, T {T}, rows {layout.num_rows}, {num_styles} styles, top {cfg.model.top}: "
+    print(f"{name} [{impl}]: B {B}, T {T}, rows {layout.num_rows}, {num_styles} styles, top {cfg.model.top}: "
           f"compile {compile_s:.1f} s; step median {med:.3f} s (min {min(times):.3f}, max {max(times):.3f}, "
-          f"{repeats} runs); {flops / 1e9:.1f} GFLOP per step -> {flops / med / 1e9:.1f} GFLOP/s")
+          f"{repeats} runs; process CPU {statistics.median(cpu):.2f} s); XLA counts {flops / 1e9:.1f} GFLOP "
+          f"-> {flops / med / 1e9:.1f} GFLOP/s; {load()}", flush=True)
     return med
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--which", default="paper,cpu")
+    ap.add_argument("--impl", default="fast", help="comma list of fast, xla")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
-    print(f"jax {jax.__version__} on {jax.devices()[0].platform} ({jax.devices()[0].device_kind}), {os.cpu_count()} cpus")
+    print(f"jax {jax.__version__} on {jax.devices()[0].platform} ({jax.devices()[0].device_kind}), "
+          f"{os.cpu_count()} cpus; {load()}")
     for which in args.which.split(","):
-        cfg = load_config(CONFIGS / f"{which}.py", check=False)
-        cfg = override(cfg, ["data.data_dir=None", "data.label_rule=synthetic"])
-        num_styles = 28 if which == "paper" else len(synthetic.STYLES)
-        med = bench(which, cfg, num_styles, args.repeats)
-        if which == "paper":
-            print(f"  reference PyTorch (2 threads): 8.57 s -> {med / 8.57:.2f}x of the reference's time")
+        cfg, layout, num_styles = paper_or_cpu(which)
+        for impl in args.impl.split(","):
+            med = bench(which, cfg, layout, num_styles, args.repeats, impl)
+            if which == "paper":
+                print(f"  reference PyTorch (2 threads): {REFERENCE_STEP_S} s -> "
+                      f"{med / REFERENCE_STEP_S:.2f}x of the reference's time")
 
 
 if __name__ == "__main__":
-    np.set_printoptions(precision=3)
     main()

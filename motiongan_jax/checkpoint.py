@@ -52,10 +52,22 @@ def restore(mngr: ocp.CheckpointManager, step: int, like_state):
 def check_compatible(meta: dict, expected: dict, where: str) -> None:
     """Refuse a checkpoint made for another skeleton, style list or architecture."""
     for key in ("style_names", "joint_names", "parents", "model", "window_T"):
-        if key in expected and _jsonable(meta.get(key)) != _jsonable(expected[key]):
+        if key in expected and _architecture(key, meta.get(key)) != _architecture(key, expected[key]):
             raise CheckpointError(
                 f"checkpoint in {where} is incompatible: its {key} is {meta.get(key)!r}, "
                 f"this run needs {expected[key]!r}")
+
+
+# model fields that choose how the same parameters are computed, not what they are: a run may
+# resume or be evaluated with another value
+_COMPUTE_ONLY = ("conv_impl", "compute_dtype")
+
+
+def _architecture(key: str, value):
+    value = _jsonable(value)
+    if key == "model" and isinstance(value, dict):
+        value = {k: v for k, v in value.items() if k not in _COMPUTE_ONLY}
+    return value
 
 
 def _jsonable(x):

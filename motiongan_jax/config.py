@@ -89,6 +89,14 @@ class ModelConfig:
     # velocity, so G starts from a skeleton of the right size moving along the curve and learns
     # the differences. Same parameters; not the paper's network.
     output_prior: str = "none"
+    # How G and D compute their convolutions: "fast" (nn/conv.py: skip and polyphase rewrites,
+    # matrix-product weight gradients; the faster form on CPU) or "xla" (the straightforward
+    # lax.conv form). Same parameters and checkpoints, same function up to float rounding
+    # (tests/test_speed.py); see docs/PERFORMANCE.md.
+    conv_impl: str = "fast"
+    # Activation dtype of G and D: "float32" or "bfloat16" (mixed precision, meant for GPUs:
+    # parameters, optimizer state, normalisation statistics and losses stay float32).
+    compute_dtype: str = "float32"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -218,6 +226,8 @@ def validate(cfg: Config) -> Config:
     need(m.use_z in ("transform", "zeros"), "model.use_z", "one of transform, zeros")
     need(m.latent_init in ("paper", "torch_default"), "model.latent_init", "one of paper, torch_default")
     need(m.output_prior in OUTPUT_PRIORS, "model.output_prior", f"one of {', '.join(OUTPUT_PRIORS)}")
+    need(m.conv_impl in ("fast", "xla"), "model.conv_impl", "one of fast, xla")
+    need(m.compute_dtype in ("float32", "bfloat16"), "model.compute_dtype", "one of float32, bfloat16")
     need(t.batch_size >= 1, "train.batch_size", "must be >= 1")
     need(t.num_steps >= 1, "train.num_steps", "must be >= 1")
     need(t.lr_g > 0 and t.lr_d > 0, "train.lr_g", "learning rates must be positive")

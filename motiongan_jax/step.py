@@ -63,27 +63,45 @@ def output_prior_rows(model_cfg, layout) -> tuple[float, ...] | None:
     return tuple(float(v) for v in rest_positions(layout)[1:].reshape(-1))
 
 
-def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key) -> Generator:
+def conv_impl(model_cfg, impl: str | None = None) -> str:
+    """How G and D run their convolutions: `impl` if given, else `model.conv_impl` ("fast":
+    nn/conv.py; "xla": the straightforward form; same parameters)."""
+    return impl if impl is not None else model_cfg.conv_impl
+
+
+def compute_dtype(model_cfg, dtype: str | None = None) -> str:
+    """G's and D's activation dtype: `dtype` if given, else `model.compute_dtype`. "bfloat16" is
+    mixed precision (for GPUs): parameters, optimizer state, normalisation statistics and losses
+    stay float32."""
+    return dtype if dtype is not None else model_cfg.compute_dtype
+
+
+def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key, impl: str = "fast",
+             dtype: str = "float32") -> Generator:
     m = model_cfg
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
-                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none",
-                     rngs=nnx.Rngs(key))
+                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", impl=impl,
+                     compute_dtype=dtype, rngs=nnx.Rngs(key))
 
 
-def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key) -> Discriminator:
+def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key, impl: str = "fast",
+             dtype: str = "float32") -> Discriminator:
     return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
-                         kw=model_cfg.kw, length_unit=model_cfg.length_unit, rngs=nnx.Rngs(key))
+                         kw=model_cfg.kw, length_unit=model_cfg.length_unit, impl=impl,
+                         compute_dtype=dtype, rngs=nnx.Rngs(key))
 
 
-def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=None
-                 ) -> tuple[Generator, Discriminator]:
+def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=None, *,
+                 impl: str | None = None, dtype: str | None = None) -> tuple[Generator, Discriminator]:
     """(G, D) as NNX modules from a full Config, initialised like `init_state` with this key (equal
     up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only.
-    `layout` is needed only for model.output_prior != "none"."""
+    `layout` is needed only for model.output_prior != "none"; `impl`, `dtype`: see `conv_impl`,
+    `compute_dtype`."""
     k_g, k_d = jax.random.split(key)
-    return (_build_g(cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout), k_g),
-            _build_d(cfg.model, cfg.data.window_T, num_joints, num_styles, k_d))
+    impl, dtype = conv_impl(cfg.model, impl), compute_dtype(cfg.model, dtype)
+    return (_build_g(cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout), k_g, impl, dtype),
+            _build_d(cfg.model, cfg.data.window_T, num_joints, num_styles, k_d, impl, dtype))
 
 
 def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransformation]:
@@ -93,13 +111,19 @@ def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransfo
             optax.adam(t.lr_d, b1=t.beta1, b2=t.beta2, eps=1e-8))
 
 
-def init_state(cfg, layout, num_styles: int, key: jax.Array) -> TrainState:
-    """Fresh G, D, spectral-norm vectors and both Adam states; step 0."""
+def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None = None,
+               dtype: str | None = None) -> TrainState:
+    """Fresh G, D, spectral-norm vectors and both Adam states; step 0. `impl` (see `conv_impl`)
+    only chooses how the convolutions are computed: same parameters, same results; `dtype` (see
+    `compute_dtype`) the activations' dtype. Both live in the graph definitions, so the step and
+    `generator_apply` follow them; parameters and optimizer state are float32 either way."""
     num_joints = _num_joints(layout)
     k_g, k_d = jax.random.split(key)
-    g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout)), k_g, nnx.Param)
+    kwargs = (("impl", conv_impl(cfg.model, impl)), ("dtype", compute_dtype(cfg.model, dtype)))
+    g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout)),
+                                 k_g, nnx.Param, build_kwargs=kwargs)
     d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_joints, num_styles),
-                                       k_d, nnx.Param, SpectralNormState)
+                                       k_d, nnx.Param, SpectralNormState, build_kwargs=kwargs)
     tx_g, tx_d = optimizers(cfg)
     opt_g, opt_d = jax.jit(lambda g, d: (tx_g.init(g), tx_d.init(d)))(g_params, d_params)
     return TrainState(g_params=g_params, d_params=d_params, d_sn_state=d_sn, opt_g_state=opt_g,

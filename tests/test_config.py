@@ -53,6 +53,8 @@ def test_override_types_and_errors():
     ("data.data_dir=/no/such/dir", "data.data_dir"),
     ("model.kw=4", "model.kw"),
     ("train.curve_points=3", "train.curve_points"),
+    ("model.conv_impl=cudnn", "model.conv_impl"),
+    ("model.compute_dtype=float16", "model.compute_dtype"),
 ])
 def test_invalid_values_name_the_field(assignment, field):
     cfg = load_config(CONFIGS / "tiny.py")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from motiongan_jax import checkpoint, curves, data, step as step_lib, train as train_lib
-from motiongan_jax.config import load_config, override
+from motiongan_jax.config import load_config, override, to_dict
 
 
 @pytest.fixture(scope="module")
@@ -157,6 +157,16 @@ def test_incompatible_checkpoint_is_refused(unbroken, tiny, tmp_path):
     with pytest.raises(checkpoint.CheckpointError, match="incompatible"):
         train_lib.train(override(tiny, ["model.top=8", "train.num_steps=6"]), tmp_path, progress=False,
                         log=lambda s: None)
+
+
+def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
+    # conv_impl and compute_dtype choose how the same parameters are computed: a run trained with
+    # one may resume or be evaluated with the other; an architecture field still refuses
+    meta = {"model": to_dict(tiny)["model"], "window_T": tiny.data.window_T}
+    other = override(tiny, ["model.conv_impl=xla", "model.compute_dtype=bfloat16"])
+    checkpoint.check_compatible(meta, {"model": to_dict(other)["model"]}, "here")
+    with pytest.raises(checkpoint.CheckpointError, match="its model is"):
+        checkpoint.check_compatible(meta, {"model": to_dict(override(tiny, ["model.top=8"]))["model"]}, "here")
 
 
 def test_dry_run_prints_parameter_counts(repo):

@@ -27,9 +27,9 @@ _FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensiv
 
 
 @functools.lru_cache(maxsize=16)
-def _compiled_init(build: Callable, build_args: tuple, filters: tuple, key_aval):
+def _compiled_init(build: Callable, build_args: tuple, filters: tuple, key_aval, build_kwargs: tuple = ()):
     def arrays(key):
-        return nnx.split(build(*build_args, key), *filters)[1:]
+        return nnx.split(build(*build_args, key, **dict(build_kwargs)), *filters)[1:]
 
     lowered = jax.jit(arrays).lower(key_aval)
     try:
@@ -38,18 +38,22 @@ def _compiled_init(build: Callable, build_args: tuple, filters: tuple, key_aval)
         return lowered.compile()
 
 
-def init_split(build: Callable[..., nnx.Module], build_args: tuple, key: jax.Array, *filters):
-    """`nnx.split(build(*build_args, key), *filters)`, the arrays made by one cached jit that is
-    compiled fast. `build` and `build_args` must be hashable (a module-level function and
-    e.g. ints and frozen configs), so that repeated inits reuse the compiled function.
+def init_split(build: Callable[..., nnx.Module], build_args: tuple, key: jax.Array, *filters,
+               build_kwargs: tuple = ()):
+    """`nnx.split(build(*build_args, key, **dict(build_kwargs)), *filters)`, the arrays made by one
+    cached jit that is compiled fast. `build`, `build_args` and `build_kwargs` (pairs) must be
+    hashable (a module-level function and e.g. ints, strings and frozen configs), so that
+    repeated inits reuse the compiled function.
     Returns (graphdef, state for filter 0, state for filter 1, ...). Under a trace (e.g.
     jax.eval_shape of an init) it simply traces `build`.
     """
+    kwargs = dict(build_kwargs)
     if isinstance(key, jax.core.Tracer):  # inside jit / eval_shape: just trace it
-        return nnx.split(build(*build_args, key), *filters)
-    graphdef = nnx.split(nnx.eval_shape(lambda: build(*build_args, key)), *filters)[0]
+        return nnx.split(build(*build_args, key, **kwargs), *filters)
+    graphdef = nnx.split(nnx.eval_shape(lambda: build(*build_args, key, **kwargs)), *filters)[0]
     key_aval = jax.ShapeDtypeStruct(key.shape, key.dtype)
-    return (graphdef, *_compiled_init(build, tuple(build_args), tuple(filters), key_aval)(key))
+    compiled = _compiled_init(build, tuple(build_args), tuple(filters), key_aval, tuple(build_kwargs))
+    return (graphdef, *compiled(key))
 
 
 __all__ = ["Discriminator", "Generator", "LatentTransform", "SpectralNormState",

@@ -18,6 +18,9 @@ strides keep the paper's grouping of joints; the parameter count does not depend
 
 Spectral norm: each call with `update_stats=True` runs one power iteration per layer and stores
 u, v (the reference calls D three times per training iteration, in train mode).
+
+`impl`: "fast" (default) or "xla", the convolution schedule of `conv.conv2d`; same results.
+`compute_dtype="bfloat16"`: bf16 convolutions and activations, float32 parameters and heads.
 """
 
 from __future__ import annotations
@@ -48,6 +51,8 @@ class Discriminator(nnx.Module):
         top: int = 64,
         kw: int = 5,
         length_unit: float = 1.0,
+        impl: str = "fast",
+        compute_dtype: str = "float32",
         rngs: nnx.Rngs,
     ):
         if not 1 <= num_joints <= PADDED_ROWS // 3:
@@ -56,10 +61,12 @@ class Discriminator(nnx.Module):
             raise ValueError(f"D needs T divisible by 16, got {seq_len}")
         self.num_joints = num_joints
         self.seq_len = seq_len
+        # activations' dtype (bf16 compute); parameters, spectral norm and the heads stay float32
+        self.compute_dtype = str(jnp.dtype(compute_dtype))
         self.length_unit = float(length_unit)
 
         def sn_conv(cin, cout):
-            return Conv(cin, cout, (kw, 3), (2, 3), spectral_norm=True, rngs=rngs)
+            return Conv(cin, cout, (kw, 3), (2, 3), spectral_norm=True, impl=impl, rngs=rngs)
 
         self.c0_0 = sn_conv(2, top)
         self.c1_0 = sn_conv(top, 2 * top)
@@ -88,17 +95,20 @@ class Discriminator(nnx.Module):
                  update_stats: bool = False) -> jax.Array:
         """Activations after c1_0 and its LeakyReLU, B x T/4 x 9 x 2top (style search)."""
         # inputs in metres; the layers work in length_unit, like the generator
-        x = self._input(root_vel_BxTx3 / self.length_unit, pose_BxTxR / self.length_unit)
-        x = leaky_relu(self.c0_0(x, update_stats=update_stats))
-        return leaky_relu(self.c1_0(x, update_stats=update_stats))
+        with jax.named_scope("D"):
+            x = self._input(root_vel_BxTx3 / self.length_unit, pose_BxTxR / self.length_unit)
+            x = x.astype(self.compute_dtype)
+            x = leaky_relu(self.c0_0(x, update_stats=update_stats))
+            return leaky_relu(self.c1_0(x, update_stats=update_stats))
 
     def __call__(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
                  update_stats: bool) -> tuple[jax.Array, jax.Array]:
         """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business."""
         x = self.features(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
-        x = leaky_relu(self.c2_0(x, update_stats=update_stats))
-        x = leaky_relu(self.c3_0(x, update_stats=update_stats))  # B x T/16 x 1 x 8top
-        flat = flatten_channel_major(x)
-        adv_B = self.l_last(flat, update_stats=update_stats)[:, 0]
-        cls_BxC = self.l_cls(flat, update_stats=update_stats)
+        with jax.named_scope("D"):
+            x = leaky_relu(self.c2_0(x, update_stats=update_stats))
+            x = leaky_relu(self.c3_0(x, update_stats=update_stats))  # B x T/16 x 1 x 8top
+            flat = flatten_channel_major(x).astype(jnp.float32)
+            adv_B = self.l_last(flat, update_stats=update_stats)[:, 0]
+            cls_BxC = self.l_cls(flat, update_stats=update_stats)
         return adv_B, cls_BxC

@@ -36,6 +36,16 @@ gliding along the curve instead of a collapsed one standing still.
 
 Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
+
+`impl="fast"` (default) computes the same function with less work (docs/PERFORMANCE.md):
+the tiled skips' share of dc2_1 / dc1_1 is computed on one column and broadcast, and each
+"upsample x2 then tconv" is one polyphase correlation of the un-upsampled input
+(`ConvTranspose.upsampled`); the convolutions use `conv.conv2d`'s CPU schedule. `impl="xla"`
+is the straightforward form above (tile, concatenate, upsample, lax.conv), kept as the reference
+that tests/test_speed.py compares against. Parameters are identical.
+
+`compute_dtype="bfloat16"` runs the convolutions and activations in bf16 (mixed precision, for
+GPUs); parameters, AdaIN statistics, the Latent Transform and the outputs stay float32.
 """
 
 from __future__ import annotations
@@ -57,8 +67,12 @@ class StyledBlock(nnx.Module):
         self.conv = conv
         self.adain = AdaIN(channels, w_dim, rngs=rngs)
 
+    def activate(self, h_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
+        """LeakyReLU then AdaIN(w) of the conv's output."""
+        return self.adain(leaky_relu(h_BxTxWxC), w_BxW)
+
     def __call__(self, x_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
-        return self.adain(leaky_relu(self.conv(x_BxTxWxC)), w_BxW)
+        return self.activate(self.conv(x_BxTxWxC), w_BxW)
 
 
 def _tile_w(x_BxTx1xC: jax.Array, width: int) -> jax.Array:
@@ -83,6 +97,8 @@ class Generator(nnx.Module):
         length_unit: float = 1.0,
         rest_pose_R: tuple[float, ...] | None = None,
         residual_root: bool = False,
+        impl: str = "fast",
+        compute_dtype: str = "float32",
         rngs: nnx.Rngs,
     ):
         if not 1 <= num_joints <= MAX_JOINTS:
@@ -91,6 +107,9 @@ class Generator(nnx.Module):
             raise ValueError(f"kw must be odd, got {kw}")
         self.num_joints = num_joints
         self.num_rows = 3 * num_joints
+        self.impl = impl
+        # activations' dtype; parameters, normalisation statistics and outputs stay float32
+        self.compute_dtype = str(jnp.dtype(compute_dtype))
         # inputs and outputs are in metres; the layers work in this unit (the paper's data unit)
         self.length_unit = float(length_unit)
         self.w_dim = w_dim
@@ -103,10 +122,11 @@ class Generator(nnx.Module):
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
-            return StyledBlock(Conv(cin, cout, (kw, kwidth), stride, pad_w=pad_w, rngs=rngs), cout, w_dim, rngs=rngs)
+            return StyledBlock(Conv(cin, cout, (kw, kwidth), stride, pad_w=pad_w, impl=impl, rngs=rngs),
+                               cout, w_dim, rngs=rngs)
 
         def tconv(cin, cout):
-            return StyledBlock(ConvTranspose(cin, cout, (kw, 3), rngs=rngs), cout, w_dim, rngs=rngs)
+            return StyledBlock(ConvTranspose(cin, cout, (kw, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
 
         t1, t2, t4, t8 = top, 2 * top, 4 * top, 8 * top
         self.ec0_0 = conv(1, t1)
@@ -123,8 +143,8 @@ class Generator(nnx.Module):
         self.dc2_0 = conv(t4, t2, 3, pad_w=1)
         self.dc1_1 = tconv(t2 + t2, t2)
         self.dc1_0 = conv(t2, t1, 3, pad_w=1)
-        self.c_traj = Conv(t1, 3, (kw, self.num_rows), rngs=rngs)
-        self.dc0_0 = Conv(t1, 1, (kw, 1), rngs=rngs)
+        self.c_traj = Conv(t1, 3, (kw, self.num_rows), impl=impl, rngs=rngs)
+        self.dc0_0 = Conv(t1, 1, (kw, 1), impl=impl, rngs=rngs)
 
     def style(self, labels_B: jax.Array, z_BxZ: jax.Array) -> jax.Array:
         """The style code w (B x w_dim) of the Latent Transform."""
@@ -139,27 +159,39 @@ class Generator(nnx.Module):
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
         w = w_BxW
-        x = (curve_vel_BxTx3 / self.length_unit)[..., None]  # B x T x 3 x 1
-        x = self.ec0_0(x, w)
-        x = self.ec1_0(x, w)
-        e1 = self.ec1_1(x, w)
-        x = self.ec2_0(e1, w)
-        e2 = self.ec2_1(x, w)
-        x = self.ec3_0(e2, w)
-        x = self.ec3_1(x, w)
 
-        x = upsample_time2(self.dc_bottom(x, w))
-        x = self.dc3_1(x, w)
-        d2 = self.dc3_0(x, w)
-        x = upsample_time2(jnp.concatenate([_tile_w(e2, d2.shape[2]), d2], axis=-1))
-        x = self.dc2_1(x, w)
-        d1 = self.dc2_0(x, w)[:, :, : self.num_joints]
-        x = upsample_time2(jnp.concatenate([_tile_w(e1, d1.shape[2]), d1], axis=-1))
-        x = self.dc1_1(x, w)
-        d0 = self.dc1_0(x, w)
+        def block(name, x):
+            with jax.named_scope(name):  # names the ops in profiles (bench/bench_profile.py)
+                return getattr(self, name)(x, w)
 
-        root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :] * self.length_unit
-        pose_BxTxR = self.dc0_0(d0)[..., 0] * self.length_unit
+        def up_block(name, d, e=None):
+            """block(name, upsample_time2(concat[tile(e), d])), the fast way or the plain way."""
+            with jax.named_scope(name):
+                blk = getattr(self, name)
+                if self.impl == "xla":
+                    x = d if e is None else jnp.concatenate([_tile_w(e, d.shape[2]), d], axis=-1)
+                    return blk(upsample_time2(x), w)
+                return blk.activate(blk.conv.upsampled(d, e), w)
+
+        x = (curve_vel_BxTx3 / self.length_unit)[..., None].astype(self.compute_dtype)  # B x T x 3 x 1
+        x = block("ec0_0", x)
+        x = block("ec1_0", x)
+        e1 = block("ec1_1", x)
+        x = block("ec2_0", e1)
+        e2 = block("ec2_1", x)
+        x = block("ec3_0", e2)
+        x = block("ec3_1", x)
+
+        x = up_block("dc3_1", block("dc_bottom", x))
+        d2 = block("dc3_0", x)
+        x = up_block("dc2_1", d2, e2)
+        d1 = block("dc2_0", x)[:, :, : self.num_joints]
+        x = up_block("dc1_1", d1, e1)
+        d0 = block("dc1_0", x)
+
+        with jax.named_scope("heads"):
+            root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :].astype(jnp.float32) * self.length_unit
+            pose_BxTxR = self.dc0_0(d0)[..., 0].astype(jnp.float32) * self.length_unit
         if self.residual_root:
             root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
         if self.rest_pose_R is not None:
