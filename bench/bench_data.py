@@ -49,8 +49,9 @@ def bench_preprocess(data_dir: Path, repeats: int) -> None:
           f"over {repeats} runs")
 
 
-def bench_batches(repeats: int) -> None:
-    # Four long 120 fps clips, like the reference's own timing set-up (2400-3300 frames each).
+def long_clips() -> tuple[list, list[str]]:
+    """Four long 120 fps synthetic clips on the CMU skeleton, like the reference's own timing
+    set-up (2400-3300 frames each), and their style names."""
     clips = []
     styles = list(synthetic.STYLES)[:4]
     for i, name in enumerate(styles):
@@ -59,6 +60,11 @@ def bench_batches(repeats: int) -> None:
         root, pose = to_rows(kinematics.world_positions(motion)[1:] * 0.056444, layout)
         clips.append(data.Clip(name, data.FileLabel(name, 1), 120.0, root.astype(np.float32),
                                pose.astype(np.float32), layout))
+    return clips, styles
+
+
+def bench_batches(repeats: int) -> None:
+    clips, styles = long_clips()
     cfg = DataConfig(frame_nums=1024, frame_step=8, control_point_interval=256, window_stride=3)
     arrays = data.build_arrays(clips, tuple(styles), cfg)
     sample = jax.jit(data.make_sample_batch(cfg, 24))

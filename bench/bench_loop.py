@@ -1,0 +1,125 @@
+#!/usr/bin/env python
+"""Does the training step wait for data? (run by hand, never in CI). Prints medians.
+
+Three loops over the same jitted train_step, timed per iteration (blocks of `--block` steps,
+median over `--repeats` blocks, nothing blocks inside a block):
+
+* fixed:   one batch, sampled once; the step alone (no data cost at all);
+* train:   `train.py`'s loop: sample_batch(arrays, key, s) then train_step, both dispatched
+           asynchronously, the metrics read one step late;
+* fused:   batch s+1 sampled inside the jitted step s (one XLA program, so the sampler can run
+           beside the step's own ops).
+
+"train - fixed" is what data costs the step. Also the sampler alone (jitted, blocked per call).
+The cpu config reads the embedded dataset; the paper shapes use four long synthetic 120 fps
+clips (bench_data.py's set-up: 1024 frames at step 8, FPS and rotation augmentation).
+
+  JAX_PLATFORMS=cpu python bench/bench_loop.py [--which cpu,paper] [--block 20] [--repeats 5]
+"""
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import jax  # noqa: E402
+
+from bench.bench_data import long_clips  # noqa: E402
+from bench.timing import load, median_time  # noqa: E402
+from motiongan_jax import data, step as step_lib  # noqa: E402
+from motiongan_jax.config import load_config, override  # noqa: E402
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def setup(which: str):
+    """(cfg, arrays, layout, num_styles) with real batches for `which`."""
+    if which == "cpu":
+        cfg = load_config(CONFIGS / "cpu.py")
+        dataset = data.load_dataset(cfg.data, log=lambda s: None)
+        clips, styles, layout = dataset.train, dataset.style_names, dataset.layout
+    else:
+        cfg = override(load_config(CONFIGS / "paper.py", check=False),
+                       ["data.data_dir=None", "data.label_rule=synthetic", "data.control_point_interval=256",
+                        "data.window_stride=3"])
+        clips, styles = long_clips()
+        layout = clips[0].layout
+    return cfg, data.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles)
+
+
+def per_step(loop, block: int, repeats: int) -> float:
+    """Median seconds per step over `repeats` blocks of `block` steps (one untimed block first)."""
+    loop(block)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        loop(block)
+        times.append((time.perf_counter() - t0) / block)
+    return statistics.median(times)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--which", default="cpu,paper")
+    ap.add_argument("--block", type=int, default=20)
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {load()}")
+    for which in args.which.split(","):
+        cfg, arrays, layout, num_styles = setup(which)
+        block = args.block if which == "cpu" else max(2, args.block // 10)
+        B = cfg.train.batch_size
+        k_data, k_step = jax.random.key(1), jax.random.key(2)
+        sample_fn = data.make_sample_batch(cfg.data, B)
+        step_fn = step_lib.make_train_step(cfg, layout, num_styles)
+        sample = jax.jit(sample_fn)
+        train_step = jax.jit(step_fn, donate_argnums=0)
+
+        def fused_fn(state, batch, key, arrays, s):
+            state, metrics = step_fn(state, batch, key)
+            return state, metrics, sample_fn(arrays, k_data, s + 1)
+
+        fused = jax.jit(fused_fn, donate_argnums=(0, 1))
+        sample_s = median_time(sample, arrays, k_data, 0, repeats=20)
+        holder = {"state": step_lib.init_state(cfg, layout, num_styles, jax.random.key(0)), "s": 0}
+        fixed_batch = sample(arrays, k_data, 0)
+
+        def loop_fixed(n):
+            for _ in range(n):
+                holder["state"], m = train_step(holder["state"], fixed_batch, jax.random.fold_in(k_step, holder["s"]))
+                holder["s"] += 1
+            jax.block_until_ready(m)
+
+        def loop_train(n):
+            pending = None
+            for _ in range(n):
+                batch = sample(arrays, k_data, holder["s"])
+                holder["state"], m = train_step(holder["state"], batch, jax.random.fold_in(k_step, holder["s"]))
+                if pending is not None:
+                    jax.device_get(pending)  # train.py reads the previous step's metrics
+                pending = m
+                holder["s"] += 1
+            jax.block_until_ready(pending)
+
+        def loop_fused(n):
+            batch = sample(arrays, k_data, holder["s"])
+            for _ in range(n):
+                holder["state"], m, batch = fused(holder["state"], batch, jax.random.fold_in(k_step, holder["s"]),
+                                                   arrays, holder["s"])
+                holder["s"] += 1
+            jax.block_until_ready(m)
+
+        results = {name: per_step(loop, block, args.repeats)
+                   for name, loop in (("fixed", loop_fixed), ("train", loop_train), ("fused", loop_fused))}
+        print(f"{which}: B {B}, T {cfg.data.window_T}; sampler alone {sample_s * 1e3:.2f} ms/batch; per step: "
+              + ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in results.items())
+              + f"; train - fixed {1e3 * (results['train'] - results['fixed']):+.1f} ms "
+              f"({block} steps x {args.repeats} blocks; {load()})", flush=True)
+
+
+if __name__ == "__main__":
+    main()
