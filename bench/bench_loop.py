@@ -7,6 +7,7 @@ median over `--repeats` blocks, nothing blocks inside a block):
 * fixed:   one batch, sampled once; the step alone (no data cost at all);
 * train:   `train.py`'s loop: sample_batch(arrays, key, s) then train_step, both dispatched
            asynchronously, the metrics read one step late;
+* ahead:   the same two programs, but batch s+1 is dispatched before step s;
 * fused:   batch s+1 sampled inside the jitted step s (one XLA program, so the sampler can run
            beside the step's own ops).
 
@@ -105,16 +106,34 @@ def main():
                 holder["s"] += 1
             jax.block_until_ready(pending)
 
+        def loop_ahead(n):
+            pending = None
+            batch = sample(arrays, k_data, holder["s"])
+            for _ in range(n):
+                s = holder["s"]
+                next_batch = sample(arrays, k_data, s + 1)  # dispatched before the step that precedes it
+                holder["state"], m = train_step(holder["state"], batch, jax.random.fold_in(k_step, s))
+                if pending is not None:
+                    jax.device_get(pending)
+                pending, batch = m, next_batch
+                holder["s"] += 1
+            jax.block_until_ready(pending)
+
         def loop_fused(n):
+            pending = None
             batch = sample(arrays, k_data, holder["s"])
             for _ in range(n):
                 holder["state"], m, batch = fused(holder["state"], batch, jax.random.fold_in(k_step, holder["s"]),
                                                    arrays, holder["s"])
+                if pending is not None:
+                    jax.device_get(pending)
+                pending = m
                 holder["s"] += 1
-            jax.block_until_ready(m)
+            jax.block_until_ready(pending)
 
         results = {name: per_step(loop, block, args.repeats)
-                   for name, loop in (("fixed", loop_fixed), ("train", loop_train), ("fused", loop_fused))}
+                   for name, loop in (("fixed", loop_fixed), ("train", loop_train), ("ahead", loop_ahead),
+                                       ("fused", loop_fused))}
         print(f"{which}: B {B}, T {cfg.data.window_T}; sampler alone {sample_s * 1e3:.2f} ms/batch; per step: "
               + ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in results.items())
               + f"; train - fixed {1e3 * (results['train'] - results['fixed']):+.1f} ms "
