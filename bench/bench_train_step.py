@@ -11,7 +11,11 @@ at the paper's shapes (G forward 3.1 s, D update 0.24 s, G update 5.0 s).
 `--impl xla` times the straightforward convolutions (tile + concat skips, upsample then tconv,
 plain lax.conv), `--impl fast` (default) the rewrites of nn/conv.py and nn/generator.py.
 
-  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,cpu] [--impl fast,xla] [--repeats 5]
+`--dtype bfloat16` times mixed precision (bf16 activations, float32 parameters and optimizer
+state). On a GPU (drop JAX_PLATFORMS=cpu) it also prints it/s and the allocator's peak memory.
+
+  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,cpu] [--impl fast,xla]
+                                                     [--dtype float32,bfloat16] [--repeats 5]
 """
 
 import argparse
@@ -57,9 +61,16 @@ def fake_batch(B, T, R, num_styles, key):
     }
 
 
-def bench(name, cfg, layout, num_styles, repeats, impl):
+def peak_device_memory() -> str:
+    """Peak bytes the device allocator has handed out (GPUs; XLA:CPU keeps no such statistic)."""
+    stats = jax.devices()[0].memory_stats() or {}
+    peak = stats.get("peak_bytes_in_use")
+    return f"; peak device memory {peak / 2**30:.2f} GiB" if peak else ""
+
+
+def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
     B, T = cfg.train.batch_size, cfg.data.window_T
-    state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
+    state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
     step_fn = jax.jit(step_lib.make_train_step(cfg, layout, num_styles), donate_argnums=0)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
     t0 = time.perf_counter()
@@ -78,10 +89,10 @@ def bench(name, cfg, layout, num_styles, repeats, impl):
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     med = statistics.median(times)
-    print(f"{name} [{impl}]: B {B}, T {T}, rows {layout.num_rows}, {num_styles} styles, top {cfg.model.top}: "
+    print(f"{name} [{impl}, {dtype}]: B {B}, T {T}, rows {layout.num_rows}, {num_styles} styles, top {cfg.model.top}: "
           f"compile {compile_s:.1f} s; step median {med:.3f} s (min {min(times):.3f}, max {max(times):.3f}, "
           f"{repeats} runs; process CPU {statistics.median(cpu):.2f} s); XLA counts {flops / 1e9:.1f} GFLOP "
-          f"-> {flops / med / 1e9:.1f} GFLOP/s; {load()}", flush=True)
+          f"-> {flops / med / 1e9:.1f} GFLOP/s; {1 / med:.2f} it/s{peak_device_memory()}; {load()}", flush=True)
     return med
 
 
@@ -89,14 +100,15 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--which", default="paper,cpu")
     ap.add_argument("--impl", default="fast", help="comma list of fast, xla")
+    ap.add_argument("--dtype", default="float32", help="comma list of float32, bfloat16 (compute dtype)")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     print(f"jax {jax.__version__} on {jax.devices()[0].platform} ({jax.devices()[0].device_kind}), "
           f"{os.cpu_count()} cpus; {load()}")
     for which in args.which.split(","):
         cfg, layout, num_styles = paper_or_cpu(which)
-        for impl in args.impl.split(","):
-            med = bench(which, cfg, layout, num_styles, args.repeats, impl)
+        for impl, dtype in [(i, d) for i in args.impl.split(",") for d in args.dtype.split(",")]:
+            med = bench(which, cfg, layout, num_styles, args.repeats, impl, dtype)
             if which == "paper":
                 print(f"  reference PyTorch (2 threads): {REFERENCE_STEP_S} s -> "
                       f"{med / REFERENCE_STEP_S:.2f}x of the reference's time")

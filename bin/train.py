@@ -48,8 +48,11 @@ def main(argv=None) -> int:
 
             print(describe(cfg))
             return 0
+        from motiongan_jax import parallel
         from motiongan_jax.train import NonFiniteError, train
 
+        # several hosts: only when the coordinator variables are set (docs/PERFORMANCE.md)
+        parallel.maybe_initialize_distributed()
         last = train(cfg, args.workdir, progress=not args.no_progress)
     except (ConfigError, DataError, BVHError, CheckpointError) as err:
         print(f"error: {err}", file=sys.stderr)

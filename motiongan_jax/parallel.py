@@ -7,7 +7,9 @@ single-device step on the same global batch up to the order of float additions.
 
 Across hosts, `maybe_initialize_distributed()` calls `jax.distributed.initialize()` when the
 standard variables are set (JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID), after
-which `jax.devices()` lists every host's devices and the same code runs unchanged.
+which `jax.devices()` lists every host's devices and the same code runs unchanged; `bin/train.py`
+calls it first. Not tested across real hosts (none available): every process would load the
+data, sample the same global batch and write the same metrics and checkpoints.
 """
 
 from __future__ import annotations
