@@ -1,12 +1,13 @@
 #!/usr/bin/env python
 """Does the training step wait for data? (run by hand, never in CI). Prints medians.
 
-Three loops over the same jitted train_step, timed per iteration (blocks of `--block` steps,
-median over `--repeats` blocks, nothing blocks inside a block):
+Four loops over the same jitted train_step, timed per iteration (blocks of `--block` steps,
+median over `--repeats` blocks; inside a block each step's metrics are read after the next step
+is dispatched, as train.py does):
 
 * fixed:   one batch, sampled once; the step alone (no data cost at all);
 * train:   `train.py`'s loop: sample_batch(arrays, key, s) then train_step, both dispatched
-           asynchronously, the metrics read one step late;
+           asynchronously;
 * ahead:   the same two programs, but batch s+1 is dispatched before step s;
 * fused:   batch s+1 sampled inside the jitted step s (one XLA program, so the sampler can run
            beside the step's own ops).
@@ -89,51 +90,39 @@ def main():
         holder = {"state": step_lib.init_state(cfg, layout, num_styles, jax.random.key(0)), "s": 0}
         fixed_batch = sample(arrays, k_data, 0)
 
-        def loop_fixed(n):
-            for _ in range(n):
-                holder["state"], m = train_step(holder["state"], fixed_batch, jax.random.fold_in(k_step, holder["s"]))
-                holder["s"] += 1
-            jax.block_until_ready(m)
-
-        def loop_train(n):
+        def run(n, step_once):
+            """n steps of step_once(s) -> metrics, each step's metrics read after the next step is
+            dispatched, as train.py does."""
             pending = None
             for _ in range(n):
-                batch = sample(arrays, k_data, holder["s"])
-                holder["state"], m = train_step(holder["state"], batch, jax.random.fold_in(k_step, holder["s"]))
-                if pending is not None:
-                    jax.device_get(pending)  # train.py reads the previous step's metrics
-                pending = m
+                m = step_once(holder["s"])
                 holder["s"] += 1
-            jax.block_until_ready(pending)
-
-        def loop_ahead(n):
-            pending = None
-            batch = sample(arrays, k_data, holder["s"])
-            for _ in range(n):
-                s = holder["s"]
-                next_batch = sample(arrays, k_data, s + 1)  # dispatched before the step that precedes it
-                holder["state"], m = train_step(holder["state"], batch, jax.random.fold_in(k_step, s))
-                if pending is not None:
-                    jax.device_get(pending)
-                pending, batch = m, next_batch
-                holder["s"] += 1
-            jax.block_until_ready(pending)
-
-        def loop_fused(n):
-            pending = None
-            batch = sample(arrays, k_data, holder["s"])
-            for _ in range(n):
-                holder["state"], m, batch = fused(holder["state"], batch, jax.random.fold_in(k_step, holder["s"]),
-                                                   arrays, holder["s"])
                 if pending is not None:
                     jax.device_get(pending)
                 pending = m
-                holder["s"] += 1
             jax.block_until_ready(pending)
 
-        results = {name: per_step(loop, block, args.repeats)
-                   for name, loop in (("fixed", loop_fixed), ("train", loop_train), ("ahead", loop_ahead),
-                                       ("fused", loop_fused))}
+        def step_on(batch, s):
+            holder["state"], m = train_step(holder["state"], batch, jax.random.fold_in(k_step, s))
+            return m
+
+        def ahead_once(s):
+            batch = holder.pop("ahead", None) or sample(arrays, k_data, s)
+            holder["ahead"] = sample(arrays, k_data, s + 1)  # dispatched before the step that precedes it
+            return step_on(batch, s)
+
+        def fused_once(s):
+            batch = holder.pop("fused", None) or sample(arrays, k_data, s)
+            holder["state"], m, holder["fused"] = fused(holder["state"], batch, jax.random.fold_in(k_step, s),
+                                                        arrays, s)
+            return m
+
+        loops = {"fixed": lambda s: step_on(fixed_batch, s),
+                 "train": lambda s: step_on(sample(arrays, k_data, s), s),
+                 "ahead": ahead_once,
+                 "fused": fused_once}
+        results = {name: per_step(lambda n, once=once: run(n, once), block, args.repeats)
+                   for name, once in loops.items()}
         print(f"{which}: B {B}, T {cfg.data.window_T}; sampler alone {sample_s * 1e3:.2f} ms/batch; per step: "
               + ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in results.items())
               + f"; train - fixed {1e3 * (results['train'] - results['fixed']):+.1f} ms "
