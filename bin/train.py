@@ -23,7 +23,8 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default=None, help="BVH directory (default: the embedded dataset)")
     ap.add_argument("--seed", type=int, default=None)
     ap.add_argument("--steps", type=int, default=None, help="total training steps (train.num_steps)")
-    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE", help="override config fields")
+    ap.add_argument("--set", nargs="+", action="extend", default=[], metavar="FIELD=VALUE",
+                    help="override config fields (repeatable: --set a=1 b=2 --set c=3)")
     ap.add_argument("--dry-run", action="store_true", help="print parameter counts and shapes, then exit")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)

@@ -26,7 +26,8 @@ def main(argv=None) -> int:
     src.add_argument("--workdir", help="a training run: use its config.json")
     ap.add_argument("--out", default=None, help="evaluator .npz (default: WORKDIR/evaluator.npz)")
     ap.add_argument("--data", default=None, help="BVH directory (default: the config's)")
-    ap.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE")
+    ap.add_argument("--set", nargs="+", action="extend", default=[], metavar="FIELD=VALUE",
+                    help="override config fields (repeatable)")
     ap.add_argument("--steps", type=int, default=None, help="evaluator training steps (default 1500)")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)

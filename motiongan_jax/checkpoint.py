@@ -9,12 +9,15 @@ checkpoint that `latest_step` would pick up.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
 import jax
 import numpy as np
 import orbax.checkpoint as ocp
+
+from motiongan_jax.config import ModelConfig
 
 
 class CheckpointError(RuntimeError):
@@ -66,6 +69,9 @@ _COMPUTE_ONLY = ("conv_impl", "compute_dtype")
 def _architecture(key: str, value):
     value = _jsonable(value)
     if key == "model" and isinstance(value, dict):
+        # a field missing from an older checkpoint's meta predates that option, whose default is
+        # what the run was trained with
+        value = {**_jsonable(dataclasses.asdict(ModelConfig())), **value}
         value = {k: v for k, v in value.items() if k not in _COMPUTE_ONLY}
     return value
 

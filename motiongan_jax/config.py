@@ -63,6 +63,8 @@ class DataConfig:
 
 
 OUTPUT_PRIORS = ("none", "rest_and_curve")
+G_FRAMES = ("world", "curve")
+D_FRAMES = ("world", "window")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,6 +91,17 @@ class ModelConfig:
     # velocity, so G starts from a skeleton of the right size moving along the curve and learns
     # the differences. Same parameters; not the paper's network.
     output_prior: str = "none"
+    # The frame G works in: "world" (the paper: G must learn to turn the body to the path for every
+    # direction the rotation augmentation draws) or "curve" (small configs: G sees the curve from
+    # the walker's heading and its motion is turned to the path's smoothed heading; exactly
+    # equivariant to rotations about +y; nn/generator.py). Same parameters.
+    g_frame: str = "world"
+    # True (small configs): G's bones take the skeleton's lengths exactly, keeping the directions
+    # G outputs (nn/generator.py project_bones); False: the paper, only the bone loss. Same parameters.
+    exact_bones: bool = False
+    # The frame D judges in: "world" (the paper) or "window" (small configs: each window turned so
+    # that its travel points along +z, the evaluator's frame; nn/discriminator.py). Same parameters.
+    d_frame: str = "world"
     # How G and D compute their convolutions: "fast" (nn/conv.py: skip and polyphase rewrites,
     # matrix-product weight gradients; the faster form on CPU) or "xla" (the straightforward
     # lax.conv form). Same parameters and checkpoints, same function up to float rounding
@@ -154,6 +167,8 @@ def _parse_value(text: str, current: Any, field: str) -> Any:
         if text.lower() in ("none", "null"):
             return None
         return text
+    if isinstance(current, bool) and text.lower() in ("true", "false"):
+        return text.lower() == "true"
     try:
         value = ast.literal_eval(text)
     except (ValueError, SyntaxError):
@@ -226,6 +241,9 @@ def validate(cfg: Config) -> Config:
     need(m.use_z in ("transform", "zeros"), "model.use_z", "one of transform, zeros")
     need(m.latent_init in ("paper", "torch_default"), "model.latent_init", "one of paper, torch_default")
     need(m.output_prior in OUTPUT_PRIORS, "model.output_prior", f"one of {', '.join(OUTPUT_PRIORS)}")
+    need(isinstance(m.exact_bones, bool), "model.exact_bones", "true or false")
+    need(m.g_frame in G_FRAMES, "model.g_frame", f"one of {', '.join(G_FRAMES)}")
+    need(m.d_frame in D_FRAMES, "model.d_frame", f"one of {', '.join(D_FRAMES)}")
     need(m.conv_impl in ("fast", "xla"), "model.conv_impl", "one of fast, xla")
     need(m.compute_dtype in ("float32", "bfloat16"), "model.compute_dtype", "one of float32, bfloat16")
     need(t.batch_size >= 1, "train.batch_size", "must be >= 1")

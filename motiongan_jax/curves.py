@@ -278,6 +278,32 @@ def rotate_y(x, theta):
     return jnp.stack([nx, jnp.broadcast_to(x[..., 1], nx.shape), nz], axis=-1)
 
 
+def heading(v_BxTx3):
+    """Heading of floor velocities, radians about +y with 0 = +z: atan2(v_x, v_z), the angle that
+    `rotate_y` turns +z into. A zero velocity gets heading 0."""
+    v = jnp.asarray(v_BxTx3)
+    return jnp.arctan2(v[..., 0], v[..., -1])
+
+
+# Binomial smoothing of the walking direction: the training curves carry 2% spatial jitter, i.e.
+# about 2 degrees of heading noise per sample, which a body turned by the raw heading would shake with.
+HEADING_TAPS = (1.0, 4.0, 6.0, 4.0, 1.0)
+
+
+def smooth_heading(v_BxTx3, taps=HEADING_TAPS):
+    """Heading (see `heading`) of the unit floor velocities averaged over time with `taps`
+    (edges replicated), so the direction changes smoothly from sample to sample. Time is axis -2."""
+    v = jnp.asarray(v_BxTx3)
+    xz = jnp.stack([v[..., 0], v[..., -1]], axis=-1)
+    unit = xz / jnp.maximum(jnp.linalg.norm(xz, axis=-1, keepdims=True), 1e-12)
+    k = jnp.asarray(taps, v.dtype) / sum(taps)
+    r = len(taps) // 2
+    t = unit.shape[-2]
+    idx = jnp.clip(jnp.arange(t)[:, None] + jnp.arange(-r, r + 1)[None, :], 0, t - 1)  # T x K
+    avg = jnp.einsum("...tkc,k->...tc", unit[..., idx, :], k)
+    return jnp.arctan2(avg[..., 0], avg[..., 1])
+
+
 # ---------------------------------------------------------------------------------------------
 # Whole clips and user curves (numpy, float64 out)
 # ---------------------------------------------------------------------------------------------

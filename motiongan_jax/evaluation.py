@@ -76,6 +76,30 @@ def foot_joints(layout) -> tuple[int, int]:
     return min(left, key=lambda i: pos[i, 1]), min(right, key=lambda i: pos[i, 1])
 
 
+def _side(name: str) -> str | None:
+    n = name.lower()
+    if n.startswith(("left", "l_")) or n.endswith(("_l", ".l")):
+        return "left"
+    if n.startswith(("right", "r_")) or n.endswith(("_r", ".r")):
+        return "right"
+    return None
+
+
+def facing_joints(layout) -> tuple[int, int] | None:
+    """(left hip, right hip) for metrics.facing_error_deg: the root's children named left and
+    right (LeftUpLeg / RightUpLeg, UpperLeg_L / UpperLeg_R), else the two furthest apart along x
+    in the rest pose, left at +x (BVH's convention: a body facing +z has its left at +x). None
+    when neither finds two (facing is then not reported)."""
+    children = [k for k, p in enumerate(layout.parents) if p == 0]
+    named = {side: [k for k in children if _side(layout.joint_names[k]) == side] for side in ("left", "right")}
+    if len(named["left"]) == 1 and len(named["right"]) == 1:
+        return named["left"][0], named["right"][0]
+    if layout.rest_offsets_m is None or len(children) < 2:
+        return None
+    pos = rest_positions(layout)
+    return max(children, key=lambda k: pos[k, 0]), min(children, key=lambda k: pos[k, 0])
+
+
 def _heading_change_deg(curve_Lx3) -> float:
     d = np.diff(curve_Lx3[:, [0, 2]], axis=0)
     d = d[np.linalg.norm(d, axis=1) > 1e-9]
@@ -173,9 +197,11 @@ def median_speed(clips, fps: float) -> float:
 
 
 def motion_metrics(joints_LxJx3, curve_Lx3, layout, feet, fps: float, contact_height: float) -> dict:
-    """Trajectory (when a curve is given), skating, skeleton and smoothness of one clip."""
+    """Trajectory (when a curve is given), skating, skeleton, facing and smoothness of one clip."""
     toes = joints_LxJx3[:, list(feet)]
+    hips = facing_joints(layout)
     out = {
+        "facing_error_deg": float("nan") if hips is None else metrics.facing_error_deg(joints_LxJx3, *hips),
         "foot_skate_original_m": metrics.foot_skate_original(toes),
         "skate_ratio": metrics.skate_ratio(toes, fps, contact_height),
         "bone_length_error": metrics.bone_length_error(joints_LxJx3, np.asarray(layout.bone_pairs),
@@ -355,7 +381,8 @@ def _search_block(ctx: Context) -> dict:
 
 
 GEN_KEYS = ("traj_error_original_m", "traj_error_symmetric_m", "endpoint_error_m", "path_length_ratio",
-            "foot_skate_original_m", "skate_ratio", "bone_length_error", "ground_penetration", "jerk_mps3")
+            "foot_skate_original_m", "skate_ratio", "bone_length_error", "ground_penetration", "jerk_mps3",
+            "facing_error_deg")
 
 
 def _mean_key(rows, key):
@@ -468,6 +495,7 @@ ROWS = [
     ("foot_skate_original_m", "foot skate, original (m per sample)"),
     ("skate_ratio", "skating ratio (contacts faster than 0.5 m/s)"),
     ("bone_length_error", "bone-length error (relative)"),
+    ("facing_error_deg", "facing vs travel direction (degrees)"),
     ("ground_penetration", f"frames with a toe > {PENETRATION_TOLERANCE_M * 100:.0f} cm below the floor"),
     ("jerk_ratio", "jerk ratio (generated / real)"),
     ("nearest_centroid_accuracy", "w nearest-centroid accuracy"),

@@ -341,6 +341,26 @@ def bone_length_error(joints_TxJx3, bone_pairs_Bx2, target_lengths_B) -> float:
     return float(np.mean(np.abs(lengths_TxB - targets) / targets))
 
 
+def facing_error_deg(joints_TxJx3, left: int, right: int, forward_offset_rad: float = 0.0, span: int = 4,
+                     min_travel_m: float = 0.05) -> float:
+    """Mean |angle| in degrees between where the body faces and where its root travels.
+
+    Facing at frame t: the vector from joint `right` to joint `left` (e.g. the hips), turned a
+    quarter turn about +y so that left = +x faces +z, plus `forward_offset_rad`. Travel: the
+    root's (joint 0) floor displacement from t − span to t + span. Frames travelling less than
+    `min_travel_m` are skipped; nan if none is left. Real walking scores a few degrees (the
+    pelvis sways); a body walking sideways scores ~90."""
+    joints = _float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3), min_len=2 * span + 1)
+    across = joints[span:-span, left] - joints[span:-span, right]
+    facing = np.arctan2(-across[:, 2], across[:, 0]) + forward_offset_rad
+    travel = joints[2 * span:, 0] - joints[: -2 * span, 0]
+    moving = np.hypot(travel[:, 0], travel[:, 2]) >= min_travel_m
+    if not moving.any():
+        return float("nan")
+    diff = np.angle(np.exp(1j * (facing - np.arctan2(travel[:, 0], travel[:, 2]))))[moving]
+    return float(np.degrees(np.mean(np.abs(diff))))
+
+
 def ground_penetration(foot_heights_TxK, tolerance_m: float = 0.0) -> float:
     """Fraction of frames in which any of the K feet is below the floor by more than
     `tolerance_m` (height y < −tolerance)."""

@@ -76,12 +76,21 @@ def compute_dtype(model_cfg, dtype: str | None = None) -> str:
     return dtype if dtype is not None else model_cfg.compute_dtype
 
 
+def generator_bones(model_cfg, layout) -> tuple[tuple[int, int, float], ...] | None:
+    """(parent, child, length in metres) of every bone when model.exact_bones, else None."""
+    if not model_cfg.exact_bones:
+        return None
+    if layout is None:
+        raise ValueError("model.exact_bones needs the skeleton's bone lengths (a layout)")
+    return tuple((int(a), int(b), float(length)) for (a, b), length in zip(layout.bone_pairs, layout.bone_lengths_m))
+
+
 def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key, impl: str = "fast",
-             dtype: str = "float32") -> Generator:
+             dtype: str = "float32", bones=None) -> Generator:
     m = model_cfg
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
-                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", impl=impl,
+                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones, impl=impl,
                      compute_dtype=dtype, rngs=nnx.Rngs(key))
 
 
@@ -89,7 +98,7 @@ def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key, imp
              dtype: str = "float32") -> Discriminator:
     return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
                          kw=model_cfg.kw, length_unit=model_cfg.length_unit, impl=impl,
-                         compute_dtype=dtype, rngs=nnx.Rngs(key))
+                         compute_dtype=dtype, frame=model_cfg.d_frame, rngs=nnx.Rngs(key))
 
 
 def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=None, *,
@@ -100,7 +109,8 @@ def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=N
     `compute_dtype`."""
     k_g, k_d = jax.random.split(key)
     impl, dtype = conv_impl(cfg.model, impl), compute_dtype(cfg.model, dtype)
-    return (_build_g(cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout), k_g, impl, dtype),
+    return (_build_g(cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout), k_g, impl, dtype,
+                     generator_bones(cfg.model, layout)),
             _build_d(cfg.model, cfg.data.window_T, num_joints, num_styles, k_d, impl, dtype))
 
 
@@ -120,8 +130,9 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None
     num_joints = _num_joints(layout)
     k_g, k_d = jax.random.split(key)
     kwargs = (("impl", conv_impl(cfg.model, impl)), ("dtype", compute_dtype(cfg.model, dtype)))
+    g_kwargs = kwargs + (("bones", generator_bones(cfg.model, layout)),)
     g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout)),
-                                 k_g, nnx.Param, build_kwargs=kwargs)
+                                 k_g, nnx.Param, build_kwargs=g_kwargs)
     d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_joints, num_styles),
                                        k_d, nnx.Param, SpectralNormState, build_kwargs=kwargs)
     tx_g, tx_d = optimizers(cfg)

@@ -277,6 +277,35 @@ def polyline_length(p):
     return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
 
+def test_heading_is_the_angle_rotate_y_turns_plus_z_into():
+    v = jnp.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 5.0, -2.0], [-3.0, 0.0, 0.0]])
+    np.testing.assert_allclose(curves.heading(v), [0.0, np.pi / 2, np.pi, -np.pi / 2], atol=1e-6)
+    th = jnp.linspace(-3.0, 3.0, 13)
+    np.testing.assert_allclose(curves.heading(curves.rotate_y(jnp.array([0.0, 0.0, 0.3]), th)), th, atol=1e-6)
+
+
+def test_smooth_heading_by_hand_and_against_numpy():
+    # a constant direction is kept exactly, whatever the speed
+    v = jnp.array([[[0.2, 0.0, 0.2], [1.0, 0.0, 1.0], [0.5, 0.0, 0.5], [3.0, 0.0, 3.0]]])
+    np.testing.assert_allclose(curves.smooth_heading(v), np.full((1, 4), np.pi / 4), atol=1e-6)
+    # a 90-degree corner: the middle sample averages 3 unit vectors along +z and 2 along +x,
+    # weights 1+4+6 = 11 and 4+1 = 5, so its heading is atan2(5, 11)
+    corner = jnp.array([[0, 0, 1]] * 4 + [[1, 0, 0]] * 4, jnp.float32)
+    got = np.asarray(curves.smooth_heading(corner))
+    assert got[3] == pytest.approx(np.arctan2(5, 11), abs=1e-6)
+    assert got[0] == pytest.approx(0.0, abs=1e-6) and got[-1] == pytest.approx(np.pi / 2, abs=1e-6)
+    assert np.all(np.diff(got) >= -1e-7)  # turns monotonically through the corner
+    # independent numpy version (edge-replicated weighted mean of unit vectors) on random walks
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(3, 20, 3)) + np.array([0.0, 0.0, 2.0])
+    u = w[..., 0::2] / np.linalg.norm(w[..., 0::2], axis=-1, keepdims=True)
+    pad = np.concatenate([u[:, :1], u[:, :1], u, u[:, -1:], u[:, -1:]], axis=1)
+    k = np.array([1, 4, 6, 4, 1]) / 16
+    avg = sum(k[i] * pad[:, i:i + 20] for i in range(5))
+    np.testing.assert_allclose(curves.smooth_heading(jnp.asarray(w, jnp.float32)),
+                               np.arctan2(avg[..., 0], avg[..., 1]), atol=1e-5)
+
+
 @pytest.mark.parametrize("name", curves.SHAPES)
 def test_shapes_start_at_origin_equally_spaced(name):
     p = curves.shape_curve(name, length=7.0, scale=1.5, num_points=300)

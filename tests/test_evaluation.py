@@ -120,6 +120,11 @@ def test_foot_joints_by_name_and_by_height():
     rest = representation.rest_positions(layout)
     assert rest[l2, 1] == rest[:, 1].min() or rest[r2, 1] == rest[:, 1].min()
     assert np.sign(rest[l2, 0]) != np.sign(rest[r2, 0])
+    # the hips for the facing metric: by name, else by the rest pose (left at +x)
+    left, right = evaluation.facing_joints(layout)
+    assert (layout.joint_names[left], layout.joint_names[right]) == ("LeftUpLeg", "RightUpLeg")
+    l3, r3 = evaluation.facing_joints(renamed)
+    assert rest[l3, 0] > 0 > rest[r3, 0] and layout.parents[l3] == layout.parents[r3] == 0
 
 
 def test_heading_change_and_shape_curves():
@@ -188,12 +193,13 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     assert sum(h["curve_counts"].values()) == len(h["curves"])
     gen = r["generated"]
     for key in ("sra_top1", "fmd", "diversity", "multimodality", "traj_error_original_m", "foot_skate_original_m",
-                "bone_length_error", "jerk_ratio", "nearest_centroid_accuracy", "interp_monotonicity",
-                "arithmetic_agreement"):
+                "bone_length_error", "facing_error_deg", "jerk_ratio", "nearest_centroid_accuracy",
+                "interp_monotonicity", "arithmetic_agreement"):
         assert key in gen and len(gen[key]["per_seed"]) == 3, key
     assert 0.0 <= gen["sra_top1"]["mean"] <= 1.0
     # the real row: real motion has its own bone lengths and walks its own curve
     assert r["real"]["bone_length_error"] < 1e-3
+    assert r["real"]["facing_error_deg"] < 10.0  # real walkers face where they go, up to pelvis sway
     assert r["real"]["path_length_ratio"] == pytest.approx(1.0, abs=0.05)
     assert r["real"]["jerk_ratio"] == 1.0
     assert np.asarray(r["confusion_generated"]).sum() > 0

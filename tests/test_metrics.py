@@ -323,6 +323,26 @@ def test_bone_length_error_scaled_skeleton():
     assert M.bone_length_error(0.8 * joints, pairs, lengths) == pytest.approx(0.2)
 
 
+def test_facing_error_by_hand():
+    """Root (joint 0) and two hips (1 left, 2 right) 0.1 m either side of it."""
+    T = 20
+
+    def body(step_xz, left_xz):
+        root = np.stack([step_xz[0] * np.arange(T), np.full(T, 0.9), step_xz[1] * np.arange(T)], -1)
+        half = 0.1 * np.array([left_xz[0], 0.0, left_xz[1]])
+        return np.stack([root, root + half, root - half], 1)
+
+    # walking along +x faces +x when the left hip is at -z (left-right turned a quarter is +x)
+    assert M.facing_error_deg(body((0.1, 0), (0, -1)), 1, 2) == pytest.approx(0.0, abs=1e-9)
+    assert M.facing_error_deg(body((0, 0.1), (0, -1)), 1, 2) == pytest.approx(90.0)  # sideways
+    assert M.facing_error_deg(body((-0.1, 0), (0, -1)), 1, 2) == pytest.approx(180.0)  # backwards
+    assert M.facing_error_deg(body((-0.1, 0), (0, -1)), 1, 2, forward_offset_rad=np.pi) == pytest.approx(0.0, abs=1e-9)
+    # hips twisted by 30 degrees
+    t = np.radians(30)
+    assert M.facing_error_deg(body((0.1, 0), (-np.sin(t), -np.cos(t))), 1, 2) == pytest.approx(30.0)
+    assert np.isnan(M.facing_error_deg(body((0, 0), (0, -1)), 1, 2))  # standing still
+
+
 def test_ground_penetration_counts():
     heights = np.array([
         [0.02, 0.10],

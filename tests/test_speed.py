@@ -18,6 +18,8 @@ Each rewrite is checked against the plain version it replaces, in float32, forwa
 
 from __future__ import annotations
 
+import functools
+
 import chex
 import jax
 import jax.numpy as jnp
@@ -255,20 +257,27 @@ def _curvy_batch(B, T, R, key):
             "curve_BxTx3": curve, "label_B": jnp.array([1, 3], jnp.int32)[:B]}
 
 
-def test_train_step_fast_equals_straightforward():
+STEP_T = 32
+STEP_CFG = validate(Config(data=DataConfig(frame_nums=STEP_T, frame_step=1), model=ModelConfig(top=8),
+                           train=TrainConfig(batch_size=2)))
+
+
+@functools.lru_cache(maxsize=None)
+def _one_step(impl: str, dtype: str):
+    """(new state, metrics) of one train step at a small config from fixed inputs; each
+    (impl, dtype) compiled once per process (the fast float32 step serves two tests)."""
     from test_step import LAYOUT, C  # the step tests' skeleton stand-in (27 joints)
 
-    T = 32
-    cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=8),
-                          train=TrainConfig(batch_size=2)))
-    batch, key = _curvy_batch(2, T, LAYOUT.num_rows, jax.random.key(42)), jax.random.key(7)
-    results = []
-    for impl in ("fast", "xla"):
-        state = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0), impl=impl)
-        step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, key).compile(
-            compiler_options=FAST)
-        results.append(step(state, batch, key))
-    (s_f, m_f), (s_p, m_p) = results
+    batch, key = _curvy_batch(2, STEP_T, LAYOUT.num_rows, jax.random.key(42)), jax.random.key(7)
+    state = step_lib.init_state(STEP_CFG, LAYOUT, C, jax.random.key(0), impl=impl, dtype=dtype)
+    step = jax.jit(step_lib.make_train_step(STEP_CFG, LAYOUT, C)).lower(state, batch, key).compile(
+        compiler_options=FAST)
+    return step(state, batch, key)
+
+
+def test_train_step_fast_equals_straightforward():
+    cfg = STEP_CFG
+    (s_f, m_f), (s_p, m_p) = _one_step("fast", "float32"), _one_step("xla", "float32")
     for name in m_p:  # every loss term, accuracy and norm (measured: <= 4e-5)
         assert abs(float(m_f[name]) - float(m_p[name])) <= 1e-3 * max(1e-3, abs(float(m_p[name]))), name
     # Adam's first step moves each parameter by about ±lr: entries whose gradient is ~0 may take
@@ -319,18 +328,9 @@ def test_bf16_generator_tracks_float32():
 
 
 def test_bf16_train_step_keeps_float32_state():
-    from test_step import LAYOUT, C
-
-    T = 32
-    cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=8),
-                          train=TrainConfig(batch_size=2)))
-    batch, key = _curvy_batch(2, T, LAYOUT.num_rows, jax.random.key(42)), jax.random.key(7)
     metrics = {}
     for dtype in ("bfloat16", "float32"):
-        state = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0), dtype=dtype)
-        step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, key).compile(
-            compiler_options=FAST)
-        new, metrics[dtype] = step(state, batch, key)
+        new, metrics[dtype] = _one_step("fast", dtype)
         leaves = jax.tree.leaves((new.g_params, new.d_params, new.opt_g_state, new.opt_d_state, new.d_sn_state))
         assert {leaf.dtype for leaf in leaves if jnp.issubdtype(leaf.dtype, jnp.floating)} == {jnp.dtype(jnp.float32)}
         chex.assert_tree_all_finite(new)

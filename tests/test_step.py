@@ -247,3 +247,106 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     np.testing.assert_allclose(bones, layout.bone_lengths_m, rtol=1e-6)
     with pytest.raises(ValueError, match="output_prior"):
         validate(dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior="mean")))
+
+
+def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
+    """model.g_frame = curve: same parameters as the world-frame G; rotating the input curve by
+    any angle rotates root velocity and pose by that angle (the world-frame G is not); at
+    initialisation, with the rest-pose prior, the body faces along the curve's smoothed heading."""
+    from motiongan_jax import curves, synthetic
+    from motiongan_jax.representation import layout_from_skeleton
+
+    layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
+    world_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
+                                model=ModelConfig(top=4, w_dim=8, z_dim=8, output_prior="rest_and_curve")))
+    curve_cfg = dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="curve"))
+    rows = step_lib.output_prior_rows(world_cfg.model, layout)
+    world = step_lib._build_g(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    g = step_lib._build_g(curve_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    assert _leaves_equal(nnx.state(world, nnx.Param), nnx.state(g, nnx.Param))
+    # a turning path (quarter circle) walked at 1.2 m/s, 15 samples per second
+    arc = jnp.linspace(0.0, np.pi / 2, T)
+    curve = (4.0 * jnp.stack([jnp.sin(arc), 0 * arc, 1 - jnp.cos(arc)], -1))[None].repeat(B, 0)
+    vel = curves.velocity(curve)
+    w = g.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
+    v1, p1 = g(vel, w)
+    chex.assert_shape([v1, p1], [(B, T, 3), (B, T, layout.num_rows)])
+    for theta in (0.4, 2.5, -1.9):
+        v2, p2 = g(curves.rotate_y(vel, theta), w)
+        np.testing.assert_allclose(np.asarray(v2), np.asarray(curves.rotate_y(v1, theta)), atol=2e-5)
+        np.testing.assert_allclose(np.asarray(p2), np.asarray(
+            curves.rotate_y(p1.reshape(B, T, -1, 3), theta).reshape(p1.shape)), atol=2e-5)
+    wv2, wp2 = world(curves.rotate_y(vel, 2.5), w)
+    wv1, wp1 = world(vel, w)
+    assert float(jnp.abs(wp2 - curves.rotate_y(wp1.reshape(B, T, -1, 3), 2.5).reshape(wp1.shape)).max()) > 0.1
+    # facing: the left hip minus the right hip, turned a quarter, is the walking direction
+    names = layout.joint_names
+    joints = p1.reshape(B, T, -1, 3)
+    across = joints[:, :, names.index("LeftUpLeg") - 1] - joints[:, :, names.index("RightUpLeg") - 1]
+    facing = np.arctan2(-np.asarray(across[..., 2]), np.asarray(across[..., 0]))
+    err = np.angle(np.exp(1j * (facing - np.asarray(curves.smooth_heading(vel)))))
+    assert np.abs(err).max() < np.radians(2.0)
+    with pytest.raises(ValueError, match="g_frame"):
+        validate(dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="body")))
+
+
+def test_window_frame_d_gives_the_same_verdict_for_every_rotation():
+    """model.d_frame = window: D turns each window's travel to +z first, so rotating a window
+    changes neither head (the world-frame D's verdicts do change); same parameters."""
+    from motiongan_jax.curves import rotate_y
+    from motiongan_jax.nn.discriminator import window_frame
+
+    cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=4, d_frame="window")))
+    world_cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, d_frame="world"))
+    d = step_lib._build_d(cfg.model, T, J, C, jax.random.key(0))
+    dw = step_lib._build_d(world_cfg.model, T, J, C, jax.random.key(0))
+    assert _leaves_equal(nnx.state(d, nnx.Param), nnx.state(dw, nnx.Param))
+    batch = _batch()
+    vel = batch["root_BxTx3"][:, 1:] - batch["root_BxTx3"][:, :-1]
+    vel = jnp.concatenate([vel[:, :1], vel], 1) + jnp.array([0.05, 0.0, 0.02])
+    pose = batch["pose_BxTxR"]
+    # by hand: travel along +x (heading pi/2) is turned to +z, and so is a row along +x
+    v_x = jnp.zeros((1, T, 3)).at[..., 0].set(0.1)
+    v_c, p_c = window_frame(v_x, jnp.tile(jnp.array([1.0, 2.0, 0.0]), (1, T, 1)))
+    np.testing.assert_allclose(np.asarray(v_c[0, 3]), [0, 0, 0.1], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(p_c[0, 3]), [0, 2, 1], atol=1e-6)
+
+    def turned(theta):
+        return rotate_y(vel, theta), rotate_y(pose.reshape(B, T, J, 3), theta).reshape(pose.shape)
+    a0, c0 = d(vel, pose, update_stats=False)
+    a1, c1 = d(*turned(1.3), update_stats=False)
+    # equal up to float rounding of the rotation (these random-weight logits are large)
+    np.testing.assert_allclose(np.asarray(a1), np.asarray(a0), rtol=2e-3)
+    np.testing.assert_allclose(np.asarray(c1), np.asarray(c0), rtol=2e-3, atol=1e-3)
+    w0, _ = dw(vel, pose, update_stats=False)
+    w1, _ = dw(*turned(1.3), update_stats=False)
+    assert float(jnp.max(jnp.abs(w1 - w0) / jnp.abs(w0))) > 0.05
+    with pytest.raises(ValueError, match="d_frame"):
+        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, d_frame="body")))
+
+
+def test_project_bones_by_hand_and_identity_on_valid_poses():
+    from motiongan_jax import synthetic
+    from motiongan_jax.nn.generator import project_bones
+    from motiongan_jax.representation import layout_from_skeleton, rest_positions
+
+    # root -> 1 (length 2) -> 2 (length 1); raw rows r1 = (0, 3, 4), r2 = r1 + (5, 0, 0)
+    raw = jnp.array([[[0.0, 3.0, 4.0, 5.0, 3.0, 4.0]]])
+    out = project_bones(raw, ((0, 1, 2.0), (1, 2, 1.0)))
+    np.testing.assert_allclose(np.asarray(out)[0, 0], [0, 1.2, 1.6, 1.0, 1.2, 1.6], atol=1e-6)
+    layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
+    bones = tuple((a, b, float(n)) for (a, b), n in zip(layout.bone_pairs, layout.bone_lengths_m))
+    rest = jnp.asarray(rest_positions(layout)[1:].reshape(1, 1, -1), jnp.float32)
+    np.testing.assert_allclose(np.asarray(project_bones(rest, bones)), np.asarray(rest), atol=1e-6)
+    # a model with exact bones: any w, any curve, every bone has the skeleton's length
+    cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
+                          model=ModelConfig(top=4, w_dim=8, z_dim=8, output_prior="rest_and_curve", exact_bones=True)))
+    g = step_lib._build_g(cfg.model, layout.num_rel_joints, C, step_lib.output_prior_rows(cfg.model, layout),
+                          jax.random.key(1), bones=step_lib.generator_bones(cfg.model, layout))
+    vel = jax.random.normal(jax.random.key(2), (B, T, 3)) * jnp.array([0.1, 0.0, 0.1])
+    _, pose = g(vel, 3.0 * jax.random.normal(jax.random.key(4), (B, 8)))
+    joints = np.concatenate([np.zeros((B, T, 1, 3)), np.asarray(pose).reshape(B, T, -1, 3)], 2)
+    lengths = np.stack([np.linalg.norm(joints[:, :, b] - joints[:, :, a], axis=-1) for a, b in layout.bone_pairs], -1)
+    np.testing.assert_allclose(lengths, np.broadcast_to(layout.bone_lengths_m, lengths.shape), rtol=1e-4, atol=1e-6)
+    with pytest.raises(ValueError, match="exact_bones"):
+        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, exact_bones="yes")))

@@ -167,6 +167,13 @@ def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
     checkpoint.check_compatible(meta, {"model": to_dict(other)["model"]}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
         checkpoint.check_compatible(meta, {"model": to_dict(override(tiny, ["model.top=8"]))["model"]}, "here")
+    # a checkpoint from before the frame and bone options: those fields are absent from its meta
+    # and mean their defaults; a run with another value is refused
+    older = {k: v for k, v in meta["model"].items() if k not in ("g_frame", "d_frame", "exact_bones")}
+    checkpoint.check_compatible({"model": older}, {"model": to_dict(tiny)["model"]}, "here")
+    with pytest.raises(checkpoint.CheckpointError, match="its model is"):
+        checkpoint.check_compatible({"model": older}, {"model": to_dict(override(tiny, ["model.g_frame=curve"]))["model"]},
+                                    "here")
 
 
 def test_dry_run_prints_parameter_counts(repo):
@@ -185,3 +192,17 @@ def test_short_training_lowers_the_curve_loss(tiny, tmp_path):
     assert len(curve) == 100
     first, last = np.mean(curve[:10]), np.mean(curve[-20:])
     assert last < 0.6 * first, (first, last)
+
+
+def test_repeated_set_flags_all_apply(repo, capsys):
+    """`--set a=1 --set b=2` applies both (the first was once silently dropped)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("train_cli", repo / "bin" / "train.py")
+    cli = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cli)
+    base = ["--config", str(repo / "configs" / "tiny.py"), "--workdir", "unused", "--dry-run"]
+    assert cli.main(base + ["--set", "data.frame_nums=60", "--set", "model.top=4"]) == 2
+    assert "data.frame_nums" in capsys.readouterr().err
+    assert cli.main(base + ["--set", "model.top=4", "model.kw=4", "--set", "model.w_dim=8"]) == 2
+    assert "model.kw" in capsys.readouterr().err

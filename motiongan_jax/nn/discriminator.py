@@ -19,6 +19,12 @@ strides keep the paper's grouping of joints; the parameter count does not depend
 Spectral norm: each call with `update_stats=True` runs one power iteration per layer and stores
 u, v (the reference calls D three times per training iteration, in train mode).
 
+Window frame (model.d_frame = "window", small configs only; "world" is the paper's D): before
+the first layer, root velocity and pose are turned about +y so that the window's travel (the sum
+of its root velocities) points along +z, the evaluator's canonical frame. D's verdicts are then
+the same for every rotation of a window, so it need not learn each direction the rotation
+augmentation draws. Same parameters.
+
 `impl`: "fast" (default) or "xla", the convolution schedule of `conv.conv2d`; same results.
 `compute_dtype="bfloat16"`: bf16 convolutions and activations, float32 parameters and heads.
 """
@@ -31,9 +37,20 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
+from motiongan_jax import curves
 from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, uniform_init
 
 PADDED_ROWS = 81
+FRAMES = ("world", "window")
+
+
+def window_frame(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Root velocity and pose turned about +y so that each window's travel, the sum of its root
+    velocities after the first (v[0] duplicates v[1], curves.velocity), points along +z."""
+    theta_B = curves.heading(jnp.sum(root_vel_BxTx3[:, 1:], axis=1))
+    b, t, r = pose_BxTxR.shape
+    pose = curves.rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), -theta_B).reshape(b, t, r)
+    return curves.rotate_y(root_vel_BxTx3, -theta_B), pose
 
 
 def flatten_channel_major(x_BxTx1xC: jax.Array) -> jax.Array:
@@ -53,8 +70,12 @@ class Discriminator(nnx.Module):
         length_unit: float = 1.0,
         impl: str = "fast",
         compute_dtype: str = "float32",
+        frame: str = "world",
         rngs: nnx.Rngs,
     ):
+        if frame not in FRAMES:
+            raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+        self.frame = frame
         if not 1 <= num_joints <= PADDED_ROWS // 3:
             raise ValueError(f"num_joints must be in 1..{PADDED_ROWS // 3}, got {num_joints}")
         if seq_len % 16:
@@ -96,6 +117,8 @@ class Discriminator(nnx.Module):
         """Activations after c1_0 and its LeakyReLU, B x T/4 x 9 x 2top (style search)."""
         # inputs in metres; the layers work in length_unit, like the generator
         with jax.named_scope("D"):
+            if self.frame == "window":
+                root_vel_BxTx3, pose_BxTxR = window_frame(root_vel_BxTx3, pose_BxTxR)
             x = self._input(root_vel_BxTx3 / self.length_unit, pose_BxTxR / self.length_unit)
             x = x.astype(self.compute_dtype)
             x = leaky_relu(self.c0_0(x, update_stats=update_stats))

@@ -34,6 +34,22 @@ the pose head adds the skeleton's rest pose (`rest_pose_R`, metres) and the root
 adds the input curve velocity. The parameters are the same; G starts as a rest-pose skeleton
 gliding along the curve instead of a collapsed one standing still.
 
+Curve frame (model.g_frame = "curve", small configs only; "world" is the paper's G): G works in
+the walker's own frame instead of the world's. Its input is each curve velocity seen from the
+heading of the previous one, u[t] = R(-θ[t-1]) v[t] (forward speed and turn, the same for every
+world rotation of the curve), and its outputs, root velocity and pose (with the rest pose prior,
+which faces +z), are turned by the smoothed heading θs[t] of the curve (`curves.smooth_heading`)
+before the world curve velocity is added. So rotating the curve rotates the motion exactly, and
+the network need not learn to turn the body to the path for every direction the rotation
+augmentation draws: with the world frame, the cpu config's bodies still faced a median 102
+degrees away from their path after 6,000 steps (docs/RESULTS.md §5). Same parameters.
+
+Exact bones (model.exact_bones, small configs only; the paper's G has only the bone loss): the
+pose head's bones keep their directions and take the skeleton's lengths, joint by joint from the
+root, p[b] = p[a] + L_ab (r[b] - r[a]) / |r[b] - r[a]| for raw rows r. A pose whose bones already
+have the right lengths is unchanged; bone lengths cannot drift, so neither D's class head nor
+its real/fake head can be answered with a stretched body.
+
 Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
 
@@ -54,10 +70,25 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
+from motiongan_jax import curves
 from motiongan_jax.nn.latent import LatentTransform
 from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, leaky_relu, upsample_time2
 
 MAX_JOINTS = 27
+FRAMES = ("world", "curve")
+
+
+def project_bones(pose_BxTxR: jax.Array, bones) -> jax.Array:
+    """Root-relative rows whose bones keep the directions of `pose_BxTxR` and have the lengths of
+    `bones` ((parent, child, length), joints numbered with the root as 0, parents first)."""
+    b, t, r = pose_BxTxR.shape
+    raw = jnp.concatenate([jnp.zeros((b, t, 1, 3), pose_BxTxR.dtype), pose_BxTxR.reshape(b, t, r // 3, 3)], axis=2)
+    out = [raw[:, :, 0]] + [None] * (r // 3)
+    for parent, child, length in sorted(bones, key=lambda x: x[1]):
+        d = raw[:, :, child] - raw[:, :, parent]
+        norm = jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True) + 1e-12)
+        out[child] = out[parent] + (length / norm) * d
+    return jnp.stack(out[1:], axis=2).reshape(b, t, r)
 
 
 class StyledBlock(nnx.Module):
@@ -97,6 +128,8 @@ class Generator(nnx.Module):
         length_unit: float = 1.0,
         rest_pose_R: tuple[float, ...] | None = None,
         residual_root: bool = False,
+        frame: str = "world",
+        bones: tuple[tuple[int, int, float], ...] | None = None,
         impl: str = "fast",
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
@@ -119,6 +152,15 @@ class Generator(nnx.Module):
         # a tuple of floats: static (part of the graph definition), not a parameter
         self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
         self.residual_root = bool(residual_root)
+        if frame not in FRAMES:
+            raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+        self.frame = frame
+        if bones is not None:
+            bones = tuple((int(a), int(b), float(length)) for a, b, length in bones)
+            if sorted(b for _, b, _ in bones) != list(range(1, num_joints + 1)) or any(a >= b for a, b, _ in bones):
+                raise ValueError("bones must be (parent, child, length) with each joint 1..J a child once, "
+                                 "parents before children")
+        self.bones = bones  # static: part of the graph definition
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
@@ -173,7 +215,11 @@ class Generator(nnx.Module):
                     return blk(upsample_time2(x), w)
                 return blk.activate(blk.conv.upsampled(d, e), w)
 
-        x = (curve_vel_BxTx3 / self.length_unit)[..., None].astype(self.compute_dtype)  # B x T x 3 x 1
+        vel_in = curve_vel_BxTx3
+        if self.frame == "curve":
+            theta_BxT = curves.heading(curve_vel_BxTx3)
+            vel_in = curves.rotate_y(curve_vel_BxTx3, -jnp.concatenate([theta_BxT[:, :1], theta_BxT[:, :-1]], 1))
+        x = (vel_in / self.length_unit)[..., None].astype(self.compute_dtype)  # B x T x 3 x 1
         x = block("ec0_0", x)
         x = block("ec1_0", x)
         e1 = block("ec1_1", x)
@@ -192,8 +238,15 @@ class Generator(nnx.Module):
         with jax.named_scope("heads"):
             root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :].astype(jnp.float32) * self.length_unit
             pose_BxTxR = self.dc0_0(d0)[..., 0].astype(jnp.float32) * self.length_unit
-        if self.residual_root:
-            root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
         if self.rest_pose_R is not None:
             pose_BxTxR = pose_BxTxR + jnp.asarray(self.rest_pose_R, pose_BxTxR.dtype)
+        if self.bones is not None:
+            pose_BxTxR = project_bones(pose_BxTxR, self.bones)
+        if self.frame == "curve":
+            out_BxT = curves.smooth_heading(curve_vel_BxTx3)
+            root_vel_BxTx3 = curves.rotate_y(root_vel_BxTx3, out_BxT)
+            b, t, r = pose_BxTxR.shape
+            pose_BxTxR = curves.rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), out_BxT[..., None]).reshape(b, t, r)
+        if self.residual_root:
+            root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
         return root_vel_BxTx3, pose_BxTxR
