@@ -30,7 +30,7 @@ import numpy as np
 import optax
 from flax import nnx
 
-from motiongan_jax import atomic
+from motiongan_jax import atomic, curves
 
 FORMAT_VERSION = 1
 
@@ -56,20 +56,15 @@ class EvaluatorConfig:
 
 def heading_angle(root_NxTx3: jax.Array) -> jax.Array:
     """Angle about +y (radians) of each window's floor chord, root[T-1] - root[0]; 0 = +z."""
-    d = root_NxTx3[:, -1] - root_NxTx3[:, 0]
-    return jnp.arctan2(d[:, 0], d[:, 2])
+    return curves.heading(root_NxTx3[:, -1] - root_NxTx3[:, 0])
 
 
 def canonical_pose(root_NxTxR3: jax.Array, pose_NxTxR: jax.Array) -> jax.Array:
     """Root-relative rows rotated about +y by minus the heading, so every window walks along +z.
     (A window that does not move keeps an arbitrary but deterministic orientation.)"""
-    theta = -heading_angle(root_NxTxR3)
     n, t, r = pose_NxTxR.shape
-    p = pose_NxTxR.reshape(n, t, r // 3, 3)
-    c, s = jnp.cos(theta)[:, None, None], jnp.sin(theta)[:, None, None]
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    # rotation about +y by theta: x' = c x + s z, z' = -s x + c z
-    return jnp.stack([c * x + s * z, y, -s * x + c * z], axis=-1).reshape(n, t, r)
+    p = curves.rotate_y(jnp.asarray(pose_NxTxR).reshape(n, t, r // 3, 3), -heading_angle(root_NxTxR3))
+    return p.reshape(n, t, r)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -90,8 +90,8 @@ def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key, impl
     m = model_cfg
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
-                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones, impl=impl,
-                     compute_dtype=dtype, rngs=nnx.Rngs(key))
+                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones,
+                     impl=impl, compute_dtype=dtype, rngs=nnx.Rngs(key))
 
 
 def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key, impl: str = "fast",

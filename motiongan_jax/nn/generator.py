@@ -41,7 +41,7 @@ world rotation of the curve), and its outputs, root velocity and pose (with the 
 which faces +z), are turned by the smoothed heading θs[t] of the curve (`curves.smooth_heading`)
 before the world curve velocity is added. So rotating the curve rotates the motion exactly, and
 the network need not learn to turn the body to the path for every direction the rotation
-augmentation draws: with the world frame, the cpu config's bodies still faced a median 102
+augmentation draws: with the world frame, the cpu config's bodies still faced a median 77
 degrees away from their path after 6,000 steps (docs/RESULTS.md §5). Same parameters.
 
 Exact bones (model.exact_bones, small configs only; the paper's G has only the bone loss): the
