@@ -102,6 +102,11 @@ class ModelConfig:
     # The frame D judges in: "world" (the paper) or "window" (small configs: each window turned so
     # that its travel points along +z, the evaluator's frame; nn/discriminator.py). Same parameters.
     d_frame: str = "world"
+    # Gait-phase input (small configs; () is the paper's G): wavelengths in metres of walked
+    # distance. G also sees sin and cos of 2 pi s[t] / wavelength + offset for each, s[t] being
+    # the distance along the input curve and the offsets random per training sample, so a
+    # translation-equivariant G has something to make a gait cycle from (nn/generator.py).
+    phase_wavelengths_m: tuple[float, ...] = ()
     # How G and D compute their convolutions: "fast" (nn/conv.py: skip and polyphase rewrites,
     # matrix-product weight gradients; the faster form on CPU) or "xla" (the straightforward
     # lax.conv form). Same parameters and checkpoints, same function up to float rounding
@@ -243,6 +248,8 @@ def validate(cfg: Config) -> Config:
     need(m.output_prior in OUTPUT_PRIORS, "model.output_prior", f"one of {', '.join(OUTPUT_PRIORS)}")
     need(isinstance(m.exact_bones, bool), "model.exact_bones", "true or false")
     need(m.g_frame in G_FRAMES, "model.g_frame", f"one of {', '.join(G_FRAMES)}")
+    need(all(isinstance(x, (int, float)) and x > 0 for x in m.phase_wavelengths_m), "model.phase_wavelengths_m",
+         "wavelengths must be positive numbers of metres")
     need(m.d_frame in D_FRAMES, "model.d_frame", f"one of {', '.join(D_FRAMES)}")
     need(m.conv_impl in ("fast", "xla"), "model.conv_impl", "one of fast, xla")
     need(m.compute_dtype in ("float32", "bfloat16"), "model.compute_dtype", "one of float32, bfloat16")

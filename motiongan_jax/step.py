@@ -91,7 +91,8 @@ def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key, impl
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
                      rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones,
-                     impl=impl, compute_dtype=dtype, rngs=nnx.Rngs(key))
+                     phase_wavelengths_m=m.phase_wavelengths_m, impl=impl, compute_dtype=dtype,
+                     rngs=nnx.Rngs(key))
 
 
 def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key, impl: str = "fast",
@@ -170,11 +171,13 @@ def latent_w(state: TrainState, labels_B: jax.Array, z_BxZ: jax.Array | None = N
 
 
 def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax.Array | None = None,
-                    z_BxZ: jax.Array | None = None, *, w_BxW: jax.Array | None = None):
+                    z_BxZ: jax.Array | None = None, *, w_BxW: jax.Array | None = None,
+                    phase_offset_BxF: jax.Array | None = None):
     """(root_vel_BxTx3, pose_BxTxR) from G with the state's parameters.
 
     Give either labels (and optionally z, default zeros) or a style code `w_BxW` directly. To run
-    other parameters, pass `state.replace(g_params=...)`.
+    other parameters, pass `state.replace(g_params=...)`. A G with a gait-phase input takes its
+    phase offsets (radians, B x F) from `phase_offset_BxF`, default 0.
     """
     g = generator(state)
     if w_BxW is None:
@@ -183,7 +186,7 @@ def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax
         labels_B = jnp.asarray(labels_B, jnp.int32)
         z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
         w_BxW = g.style(labels_B, z)
-    return g(curve_vel_BxTx3, w_BxW)
+    return g(curve_vel_BxTx3, w_BxW, phase_offset_BxF)
 
 
 def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:
@@ -255,6 +258,15 @@ def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Arra
     return labels, z
 
 
+def sample_phase(cfg, batch: int, key) -> jax.Array | None:
+    """Gait-phase offsets φ ~ U[0, 2π), B x F, for a G with model.phase_wavelengths_m; else None.
+    Drawn from fold_in(key, 1) so that the labels and z of configs without it stay as they were."""
+    num = len(cfg.model.phase_wavelengths_m)
+    if not num:
+        return None
+    return jax.random.uniform(jax.random.fold_in(key, 1), (batch, num), jnp.float32, 0.0, 2 * jnp.pi)
+
+
 # ---------------------------------------------------------------------------------------------
 # The step
 
@@ -291,6 +303,7 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         check_batch(batch, num_rows)
         curve = batch["curve_BxTx3"]
         fake_labels, z = sample_labels_and_z(cfg, num_styles, curve.shape[0], key)
+        phase = sample_phase(cfg, curve.shape[0], key)
         curve_vel = curves.velocity(curve)
         real_vel = curves.velocity(batch["root_BxTx3"])
         real_pose = batch["pose_BxTxR"]
@@ -298,7 +311,7 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         # The single G forward; its VJP carries G's loss gradient back after the D update.
         def g_forward(g_params):
             g = nnx.merge(state.g_def, g_params, copy=True)
-            return g(curve_vel, g.style(fake_labels, z))
+            return g(curve_vel, g.style(fake_labels, z), phase)
 
         fake, g_vjp = jax.vjp(g_forward, state.g_params)
 

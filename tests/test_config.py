@@ -37,6 +37,7 @@ def test_override_types_and_errors():
                           "data.fps_factors=(1.0,)", "name=x"])
     assert cfg2.train.batch_size == 8 and cfg2.train.lr_g == 0.001 and cfg2.data.rotate is False
     assert cfg2.data.fps_factors == (1.0,) and cfg2.name == "x"
+    assert override(cfg, ["model.phase_wavelengths_m=1.2"]).model.phase_wavelengths_m == (1.2,)
     assert config_hash(cfg) != config_hash(cfg2)
     assert config_hash(cfg) == config_hash(load_config(CONFIGS / "tiny.py"))
     with pytest.raises(ConfigError, match="train.nope"):
@@ -55,6 +56,8 @@ def test_override_types_and_errors():
     ("train.curve_points=3", "train.curve_points"),
     ("model.conv_impl=cudnn", "model.conv_impl"),
     ("model.compute_dtype=float16", "model.compute_dtype"),
+    ("model.phase_wavelengths_m=(1.0,0)", "model.phase_wavelengths_m"),
+    ("model.phase_wavelengths_m=('long',)", "model.phase_wavelengths_m"),
 ])
 def test_invalid_values_name_the_field(assignment, field):
     cfg = load_config(CONFIGS / "tiny.py")

@@ -350,3 +350,79 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
     np.testing.assert_allclose(lengths, np.broadcast_to(layout.bone_lengths_m, lengths.shape), rtol=1e-4, atol=1e-6)
     with pytest.raises(ValueError, match="exact_bones"):
         validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, exact_bones="yes")))
+
+
+def test_gait_phase_by_hand():
+    """a_k[t] = 2π s[t] / λ_k + φ_k with s[t] the horizontal distance walked to sample t; the
+    vertical component does not count, and a turning path counts its arc length."""
+    from motiongan_jax.nn.generator import gait_phase
+
+    vel = jnp.tile(jnp.array([0.1, 5.0, 0.0]), (1, 8, 1))  # 0.1 m per sample along x; y ignored
+    out = gait_phase(vel, (0.4, 0.8), jnp.array([[0.3, -1.0]]))
+    chex.assert_shape(out, (1, 8, 4))
+    t = np.arange(1, 9)
+    a1, a2 = np.pi / 2 * t + 0.3, np.pi / 4 * t - 1.0  # 0.1 t / 0.4 and 0.1 t / 0.8 turns
+    np.testing.assert_allclose(np.asarray(out[0]), np.stack([np.sin(a1), np.sin(a2), np.cos(a1), np.cos(a2)], -1),
+                               atol=1e-5)
+    # a quarter circle of radius 2 m in 16 steps: each step is a chord 2·2·sin(π/64) long
+    ang = np.linspace(0, np.pi / 2, 17)
+    pts = 2.0 * np.stack([np.sin(ang), 0 * ang, 1 - np.cos(ang)], -1)
+    v = jnp.asarray(np.diff(pts, axis=0)[None], jnp.float32)
+    s = 4.0 * np.sin(np.pi / 64) * np.arange(1, 17)
+    np.testing.assert_allclose(np.asarray(gait_phase(v, (1.0,), jnp.zeros((1, 1))))[0, :, 0],
+                               np.sin(2 * np.pi * s), atol=1e-5)
+
+
+def test_phase_input_grows_only_ec0_0_and_is_used():
+    """model.phase_wavelengths_m: ec0_0 takes 1 + 2F channels and every other parameter is as
+    before; the phase offset changes the motion, None means 0, and a G without the input refuses
+    offsets; G stays exactly rotation-equivariant in the curve frame."""
+    from motiongan_jax import curves
+
+    base = ModelConfig(top=4, w_dim=8, z_dim=8, output_prior="rest_and_curve", g_frame="curve")
+    lams = (0.8, 1.0, 1.3)
+    plain = step_lib._build_g(base, J, C, None, jax.random.key(3))
+    g = step_lib._build_g(dataclasses.replace(base, phase_wavelengths_m=lams), J, C, None, jax.random.key(3))
+    p_plain = nnx.to_flat_state(nnx.state(plain, nnx.Param))
+    p_phase = nnx.to_flat_state(nnx.state(g, nnx.Param))
+    differ = [k for (k, a), (_, b) in zip(p_plain, p_phase) if a[...].shape != b[...].shape]
+    assert differ == [("ec0_0", "conv", "kernel")]
+    kernel = dict(p_phase)[("ec0_0", "conv", "kernel")][...]
+    chex.assert_shape(kernel, (base.kw, 1, 1 + 2 * len(lams), base.top))
+    vel = jnp.tile(jnp.array([0.02, 0.0, 0.08]), (B, T, 1))
+    w = g.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
+    v0, p0 = g(vel, w)
+    vz, pz = g(vel, w, jnp.zeros((B, 3)))
+    assert _leaves_equal((v0, p0), (vz, pz))
+    _, p1 = g(vel, w, jnp.full((B, 3), 2.0))
+    assert float(jnp.abs(p1 - p0).max()) > 1e-3
+    offset = jnp.array([[0.1, 0.2, 0.3], [1.0, 2.0, 3.0]])
+    v1, p1 = g(vel, w, offset)
+    v2, p2 = g(curves.rotate_y(vel, 1.1), w, offset)
+    np.testing.assert_allclose(np.asarray(v2), np.asarray(curves.rotate_y(v1, 1.1)), atol=2e-5)
+    np.testing.assert_allclose(np.asarray(p2), np.asarray(curves.rotate_y(p1.reshape(B, T, -1, 3), 1.1).reshape(p1.shape)),
+                               atol=2e-5)
+    with pytest.raises(ValueError, match="no gait-phase input"):
+        plain(vel, w, offset)
+    with pytest.raises(ValueError, match="phase_wavelengths_m"):
+        validate(Config(model=dataclasses.replace(base, phase_wavelengths_m=(1.0, -0.5))))
+
+
+def test_train_step_draws_phase_offsets_and_trains_the_phase_weights():
+    cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4, g_frame="curve",
+                                                                      phase_wavelengths_m=(0.9, 1.4))))
+    assert step_lib.sample_phase(CFG, B, jax.random.key(0)) is None
+    ph = step_lib.sample_phase(cfg, 1000, jax.random.key(0))
+    chex.assert_shape(ph, (1000, 2))
+    assert float(ph.min()) >= 0.0 and float(ph.max()) < 2 * np.pi and abs(float(ph.mean()) - np.pi) < 0.2
+    # the offsets come from their own stream: labels and z are those of a config without them
+    assert _leaves_equal(step_lib.sample_labels_and_z(cfg, C, B, jax.random.key(5)),
+                         step_lib.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
+    state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state0, _batch(), jax.random.key(1)).compile(
+        compiler_options=FAST)
+    state1, m = step(state0, _batch(), jax.random.key(1))
+    chex.assert_tree_all_finite(m)
+    k0 = state0.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
+    k1 = state1.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
+    assert float(jnp.abs(k1 - k0).min()) > 0  # every phase weight got a gradient

@@ -50,6 +50,16 @@ root, p[b] = p[a] + L_ab (r[b] - r[a]) / |r[b] - r[a]| for raw rows r. A pose wh
 have the right lengths is unchanged; bone lengths cannot drift, so neither D's class head nor
 its real/fake head can be answered with a stretched body.
 
+Gait phase (model.phase_wavelengths_m, small configs; empty in the paper's G): G is
+translation-equivariant in time and its input, a curve resampled at equal arc length, is nearly
+constant (in the curve frame exactly so on a straight path), so it has nothing to hang a gait
+cycle on; the cpu config's bodies glided (docs/RESULTS.md §5). With F wavelengths λ_k, ec0_0
+takes 1 + 2F channels: the velocity plus sin and cos of 2π s[t] / λ_k + φ_k, tiled over the 3
+width rows, where s[t] is the distance walked along the curve (`gait_phase`). The offsets φ_k
+are drawn uniformly per training sample (`step.sample_phase`) so that no phase is favoured, and
+are 0 unless given at generation. The channels depend on distance, not on time, so they stay
+right under the FPS augmentation and rotate with nothing. Only ec0_0's kernel grows.
+
 Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
 
@@ -66,6 +76,7 @@ GPUs); parameters, AdaIN statistics, the Latent Transform and the outputs stay f
 
 from __future__ import annotations
 
+import chex
 import jax
 import jax.numpy as jnp
 from flax import nnx
@@ -89,6 +100,16 @@ def project_bones(pose_BxTxR: jax.Array, bones) -> jax.Array:
         norm = jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True) + 1e-12)
         out[child] = out[parent] + (length / norm) * d
     return jnp.stack(out[1:], axis=2).reshape(b, t, r)
+
+
+def gait_phase(curve_vel_BxTx3: jax.Array, wavelengths_m, offset_BxF: jax.Array) -> jax.Array:
+    """B x T x 2F: [sin(a_1..a_F), cos(a_1..a_F)], a_k[t] = 2π s[t] / λ_k + φ_k, where s[t] is the
+    horizontal distance walked up to sample t (the sum of |v[0..t]|, metres)."""
+    lam_F = jnp.asarray(wavelengths_m, jnp.float32)
+    chex.assert_shape(offset_BxF, (curve_vel_BxTx3.shape[0], lam_F.shape[0]))
+    dist_BxT = jnp.cumsum(jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1), axis=1)
+    angle_BxTxF = 2 * jnp.pi * dist_BxT[..., None] / lam_F + offset_BxF[:, None, :]
+    return jnp.concatenate([jnp.sin(angle_BxTxF), jnp.cos(angle_BxTxF)], -1)
 
 
 class StyledBlock(nnx.Module):
@@ -130,6 +151,7 @@ class Generator(nnx.Module):
         residual_root: bool = False,
         frame: str = "world",
         bones: tuple[tuple[int, int, float], ...] | None = None,
+        phase_wavelengths_m: tuple[float, ...] = (),
         impl: str = "fast",
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
@@ -161,6 +183,9 @@ class Generator(nnx.Module):
                 raise ValueError("bones must be (parent, child, length) with each joint 1..J a child once, "
                                  "parents before children")
         self.bones = bones  # static: part of the graph definition
+        if any(not lam > 0 for lam in phase_wavelengths_m):
+            raise ValueError(f"phase wavelengths must be positive, got {phase_wavelengths_m}")
+        self.phase_wavelengths_m = tuple(float(lam) for lam in phase_wavelengths_m)  # static
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
@@ -171,7 +196,7 @@ class Generator(nnx.Module):
             return StyledBlock(ConvTranspose(cin, cout, (kw, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
 
         t1, t2, t4, t8 = top, 2 * top, 4 * top, 8 * top
-        self.ec0_0 = conv(1, t1)
+        self.ec0_0 = conv(1 + 2 * len(self.phase_wavelengths_m), t1)
         self.ec1_0 = conv(t1, t2, 3, (2, 3))
         self.ec1_1 = conv(t2, t2)
         self.ec2_0 = conv(t2, t4, 1, (2, 1))
@@ -196,7 +221,10 @@ class Generator(nnx.Module):
         """(scale, bias) of every AdaIN layer for a style code, keyed by block name."""
         return {name: getattr(self, name).adain.style(w_BxW) for name in self.BLOCKS}
 
-    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array) -> tuple[jax.Array, jax.Array]:
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array,
+                 phase_offset_BxF: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        """(root_vel_BxTx3, pose_BxTxR); `phase_offset_BxF` (radians, default 0) only with a
+        gait-phase input, one per wavelength."""
         t = curve_vel_BxTx3.shape[1]
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
@@ -219,7 +247,15 @@ class Generator(nnx.Module):
         if self.frame == "curve":
             theta_BxT = curves.heading(curve_vel_BxTx3)
             vel_in = curves.rotate_y(curve_vel_BxTx3, -jnp.concatenate([theta_BxT[:, :1], theta_BxT[:, :-1]], 1))
-        x = (vel_in / self.length_unit)[..., None].astype(self.compute_dtype)  # B x T x 3 x 1
+        x = (vel_in / self.length_unit)[..., None]  # B x T x 3 x 1
+        if self.phase_wavelengths_m:
+            b, f = curve_vel_BxTx3.shape[0], len(self.phase_wavelengths_m)
+            offset = jnp.zeros((b, f), jnp.float32) if phase_offset_BxF is None else phase_offset_BxF
+            phase_BxTx2F = gait_phase(curve_vel_BxTx3, self.phase_wavelengths_m, offset)
+            x = jnp.concatenate([x, jnp.broadcast_to(phase_BxTx2F[:, :, None, :], (b, t, 3, 2 * f))], -1)
+        elif phase_offset_BxF is not None:
+            raise ValueError("phase_offset_BxF given, but this G has no gait-phase input")
+        x = x.astype(self.compute_dtype)
         x = block("ec0_0", x)
         x = block("ec1_0", x)
         e1 = block("ec1_1", x)
