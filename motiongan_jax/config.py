@@ -105,7 +105,8 @@ class ModelConfig:
     # Gait-phase input (small configs; () is the paper's G): wavelengths in metres of walked
     # distance. G also sees sin and cos of 2 pi s[t] / wavelength + offset for each, s[t] being
     # the distance along the input curve and the offsets random per training sample, so a
-    # translation-equivariant G has something to make a gait cycle from (nn/generator.py).
+    # convolutional G fed a near-constant curve has something to make a gait cycle from
+    # (nn/generator.py). It did not make one at the cpu size (docs/RESULTS.md §6).
     phase_wavelengths_m: tuple[float, ...] = ()
     # How G and D compute their convolutions: "fast" (nn/conv.py: skip and polyphase rewrites,
     # matrix-product weight gradients; the faster form on CPU) or "xla" (the straightforward

@@ -50,15 +50,17 @@ root, p[b] = p[a] + L_ab (r[b] - r[a]) / |r[b] - r[a]| for raw rows r. A pose wh
 have the right lengths is unchanged; bone lengths cannot drift, so neither D's class head nor
 its real/fake head can be answered with a stretched body.
 
-Gait phase (model.phase_wavelengths_m, small configs; empty in the paper's G): G is
-translation-equivariant in time and its input, a curve resampled at equal arc length, is nearly
-constant (in the curve frame exactly so on a straight path), so it has nothing to hang a gait
-cycle on; the cpu config's bodies glided (docs/RESULTS.md §5). With F wavelengths λ_k, ec0_0
+Gait phase (model.phase_wavelengths_m, small configs; empty in the paper's G): G's input, a
+curve resampled at equal arc length, is nearly constant (in the curve frame exactly so on a
+straight path), and G is convolutional, so apart from the window's edges and the 8-sample period
+of its strides it has nothing to hang a gait cycle on; the cpu config's bodies glide
+(docs/RESULTS.md §5). With F wavelengths λ_k, ec0_0
 takes 1 + 2F channels: the velocity plus sin and cos of 2π s[t] / λ_k + φ_k, tiled over the 3
 width rows, where s[t] is the distance walked along the curve (`gait_phase`). The offsets φ_k
 are drawn uniformly per training sample (`step.sample_phase`) so that no phase is favoured, and
 are 0 unless given at generation. The channels depend on distance, not on time, so they stay
-right under the FPS augmentation and rotate with nothing. Only ec0_0's kernel grows.
+right under the FPS augmentation and rotate with nothing. Only ec0_0's kernel grows. Measured
+on the cpu config: no gait after 10,000 steps either (docs/RESULTS.md §6), so it stays off.
 
 Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
