@@ -94,7 +94,7 @@ def run(args, log=print) -> dict:
     from motiongan_jax import atomic, checkpoint, viz
 
     out = Path(args.out)
-    state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step)
+    state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step, args.params)
     _check_writable(out)
     names = list(meta["style_names"])
     C = len(names)
@@ -195,6 +195,8 @@ def main(argv=None) -> int:
     ap.add_argument("--workdir", required=True, help="a training run's directory (with checkpoints/)")
     ap.add_argument("--out", required=True, help="output directory (created)")
     ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
+    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
+                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
     ap.add_argument("--k", type=int, default=10, help="codes per style from z ~ N(0, I)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--search", default=None, metavar="CLIP", help="a .bvh clip or an .npz of world positions")

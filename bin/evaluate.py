@@ -29,6 +29,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--k", type=int, default=3, help="noise draws per (curve, style), >= 3 in the protocol")
     ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: latest)")
+    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
+                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
     ap.add_argument("--search-steps", type=int, default=200, help="style-search optimisation steps (0: skip)")
     ap.add_argument("--max-curves", type=int, default=12, help="held-out real curves at most")
     ap.add_argument("--shapes", default=",".join(("line", "circle", "s_curve", "figure8", "corner")),
@@ -56,7 +58,7 @@ def main(argv=None) -> int:
         bad = [s for s in shapes if s not in curves.SHAPES]
         if bad:
             raise ConfigError(f"--shapes: unknown shape(s) {bad}; known: {', '.join(curves.SHAPES)}")
-        state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step)
+        state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step, args.params)
         step, _ = checkpoint.read_meta(checkpoint.manager(Path(args.workdir) / "checkpoints"), args.step)
         if args.data is not None:
             cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=args.data))
@@ -105,7 +107,10 @@ def main(argv=None) -> int:
         counts[c.kind] = counts.get(c.kind, 0) + 1
     header = {
         "workdir": str(args.workdir), "config_name": cfg.name, "config_hash": config_hash(cfg),
-        "checkpoint_step": step, "evaluator": str(ev_path), "evaluator_checksum": ev.checksum,
+        "checkpoint_step": step,
+        "g_params": (f"moving average (train.g_ema_decay {cfg.train.g_ema_decay})"
+                     if args.params == "ema" and cfg.train.g_ema_decay > 0 else "raw"),
+        "evaluator": str(ev_path), "evaluator_checksum": ev.checksum,
         "evaluator_real_heldout": ev.meta.get("real_heldout"), "style_names": list(style_names),
         "settings": dataclasses.asdict(settings), "curve_counts": counts,
         "curves": [{"name": c.name, "kind": c.kind, "samples": len(c.curve_Lx3), "source": c.source} for c in eval_curves],

@@ -36,6 +36,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--workdir", required=True, help="a training run's directory (with checkpoints/)")
     ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
+    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
+                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
     ap.add_argument("--list-styles", action="store_true", help="print the model's style names and exit")
     ap.add_argument("--style", default=None)
     ap.add_argument("--curve", default=None)
@@ -71,7 +73,7 @@ def main(argv=None) -> int:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
         gen_lib.check_output_path(args.out)  # fail before the model is loaded
         z_arg = args.z
-        state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step)
+        state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step, args.params)
         names = list(meta["style_names"])
         if args.figure:
             panels = gen_lib.figure_specs(args.figure, args.style, names, args.seed)

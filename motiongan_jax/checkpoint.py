@@ -43,13 +43,37 @@ def read_meta(mngr: ocp.CheckpointManager, step: int | None = None) -> tuple[int
 
 
 def restore(mngr: ocp.CheckpointManager, step: int, like_state):
-    """Restore the state at `step` with the structure, shapes and dtypes of `like_state`."""
+    """Restore the state at `step` with the structure, shapes and dtypes of `like_state`.
+    Checkpoints written before a state field existed restore when `like_state` leaves that
+    field None (see _LATER_FIELDS)."""
     abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like_state)
     try:
-        out = mngr.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))
+        return _restore(mngr, step, abstract)
     except (ValueError, KeyError, TypeError) as err:
+        older = _older_layout(abstract)
+        if older is not None:
+            try:
+                return abstract.replace(**_restore(mngr, step, older))
+            except (ValueError, KeyError, TypeError):
+                pass
         raise CheckpointError(f"checkpoint {mngr.directory}/{step} does not fit this model: {err}") from err
-    return out["state"]
+
+
+# TrainState fields added after checkpoints already existed; None when their option is off
+_LATER_FIELDS = ("g_ema_params",)
+
+
+def _restore(mngr, step, abstract):
+    return mngr.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))["state"]
+
+
+def _older_layout(abstract) -> dict | None:
+    """The state as the fields a checkpoint from before _LATER_FIELDS holds, or None when a
+    later field is in use (such a state cannot come from an older checkpoint)."""
+    if not dataclasses.is_dataclass(abstract) or any(getattr(abstract, f, None) is not None for f in _LATER_FIELDS):
+        return None
+    return {f.name: getattr(abstract, f.name) for f in dataclasses.fields(abstract)
+            if f.name not in _LATER_FIELDS and f.metadata.get("pytree_node", True)}
 
 
 def check_compatible(meta: dict, expected: dict, where: str) -> None:
@@ -80,8 +104,10 @@ def _jsonable(x):
     return json.loads(json.dumps(x, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))
 
 
-def load_run(workdir: str | Path, step: int | None = None):
-    """(state, meta, cfg, layout) of a training run's checkpoint, without its data."""
+def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
+    """(state, meta, cfg, layout) of a training run's checkpoint, without its data. `params`:
+    "ema" (default) puts G's moving average in `state.g_params` when the run keeps one
+    (train.g_ema_decay > 0), "raw" leaves the trained parameters (step.inference_state)."""
     from motiongan_jax import step as step_lib
     from motiongan_jax.config import from_dict
     from motiongan_jax.representation import layout_from_parents
@@ -96,4 +122,4 @@ def load_run(workdir: str | Path, step: int | None = None):
                                  meta.get("rest_offsets_m"))
     like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
     state = restore(mngr, step, like)
-    return state, meta, cfg, layout
+    return step_lib.inference_state(state, params), meta, cfg, layout

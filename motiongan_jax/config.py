@@ -143,6 +143,10 @@ class TrainConfig:
     preview_every: int = 5000
     checkpoint_every: int = 20000
     keep_checkpoints: int = 3
+    # Exponential moving average of G's parameters, used for generation, evaluation and analysis
+    # (checkpoint.load_run; training itself never reads it). 0 keeps none (the paper); e.g. 0.999
+    # averages over about the last 1,000 steps, damping G's step-to-step oscillation.
+    g_ema_decay: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -264,6 +268,7 @@ def validate(cfg: Config) -> Config:
     need(t.gan_loss in GAN_LOSSES, "train.gan_loss", f"one of {GAN_LOSSES}")
     need(t.log_every >= 1 and t.checkpoint_every >= 1 and t.preview_every >= 0, "train.log_every",
          "log/checkpoint intervals must be >= 1")
+    need(0.0 <= t.g_ema_decay < 1.0, "train.g_ema_decay", "must be in [0, 1) (0: no average)")
     need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")
     return cfg
 

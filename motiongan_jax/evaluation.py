@@ -516,7 +516,7 @@ def markdown(report: dict) -> str:
     r = report["results"]
     lines = [f"# Evaluation: {h['config_name']} (step {h['checkpoint_step']})", "",
              f"- workdir: `{h['workdir']}`", f"- config hash: `{h['config_hash']}`",
-             f"- checkpoint step: {h['checkpoint_step']}",
+             f"- checkpoint step: {h['checkpoint_step']}, G's parameters: {h.get('g_params', 'raw')}",
              f"- evaluator: `{h['evaluator']}`, checksum `{h['evaluator_checksum']}`",
              f"- evaluator accuracy on real held-out windows: {_fmt((h.get('evaluator_real_heldout') or {}).get('top1'))} "
              f"(chance {_fmt(1.0 / len(h['style_names']))})",

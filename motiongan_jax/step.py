@@ -44,6 +44,7 @@ class TrainState:
     step: jax.Array  # int32 scalar: completed iterations
     g_def: nnx.GraphDef = struct.field(pytree_node=False)
     d_def: nnx.GraphDef = struct.field(pytree_node=False)
+    g_ema_params: Any = None  # EMA of g_params under train.g_ema_decay > 0, else None
 
 
 def _num_joints(layout) -> int:
@@ -138,8 +139,22 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None
                                        k_d, nnx.Param, SpectralNormState, build_kwargs=kwargs)
     tx_g, tx_d = optimizers(cfg)
     opt_g, opt_d = jax.jit(lambda g, d: (tx_g.init(g), tx_d.init(d)))(g_params, d_params)
+    # its own buffers: the step donates the state, and one buffer cannot be donated twice
+    g_ema = jax.tree.map(jnp.copy, g_params) if cfg.train.g_ema_decay > 0 else None
     return TrainState(g_params=g_params, d_params=d_params, d_sn_state=d_sn, opt_g_state=opt_g,
-                      opt_d_state=opt_d, step=jnp.zeros((), jnp.int32), g_def=g_def, d_def=d_def)
+                      opt_d_state=opt_d, step=jnp.zeros((), jnp.int32), g_def=g_def, d_def=d_def,
+                      g_ema_params=g_ema)
+
+
+def inference_state(state: TrainState, params: str = "ema") -> TrainState:
+    """The state with the G parameters that generation should use: `params` "ema" takes the
+    moving average when the run keeps one (train.g_ema_decay > 0) and the raw parameters
+    otherwise; "raw" always the raw ones."""
+    if params not in ("ema", "raw"):
+        raise ValueError(f"params must be 'ema' or 'raw', got {params!r}")
+    if params == "raw" or state.g_ema_params is None:
+        return state
+    return state.replace(g_params=state.g_ema_params)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -296,6 +311,7 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
     if bone_lengths.shape != (len(bone_pairs),):
         raise ValueError(f"{len(bone_pairs)} bone pairs but bone_lengths_m has shape {bone_lengths.shape}")
     tx_g, tx_d = optimizers(cfg)
+    ema_decay = float(tcfg.g_ema_decay)
 
     num_rows = int(layout.num_rows)
 
@@ -344,8 +360,15 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
                    "d_grad_norm": optax.tree.norm(d_grads),
                    "d_param_norm": optax.tree.norm(d_params),
                    "d_update_norm": optax.tree.norm(d_updates)}
+        g_ema = state.g_ema_params
+        if (g_ema is None) != (ema_decay == 0):
+            raise ValueError(f"train.g_ema_decay is {ema_decay} but the state "
+                             f"{'has no' if g_ema is None else 'has an'} EMA of G; build it with init_state")
+        if g_ema is not None:
+            g_ema = jax.tree.map(lambda e, p: ema_decay * e + (1 - ema_decay) * p, g_ema, g_params)
         new_state = state.replace(g_params=g_params, d_params=d_params, d_sn_state=sn,
-                                  opt_g_state=opt_g, opt_d_state=opt_d, step=state.step + 1)
+                                  opt_g_state=opt_g, opt_d_state=opt_d, step=state.step + 1,
+                                  g_ema_params=g_ema)
         return new_state, metrics
 
     return train_step

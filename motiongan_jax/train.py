@@ -105,9 +105,11 @@ def preview_curve(T: int, spacing_m: float) -> np.ndarray:
 
 
 def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray, num: int = 3) -> Path:
-    """A few styles (z = 0) walking the fixed preview curve, as a GIF: generate.py's own path."""
+    """A few styles (z = 0) walking the fixed preview curve, as a GIF: generate.py's own path
+    (with G's moving average when the run keeps one)."""
     from motiongan_jax import generate, viz
 
+    state = step_lib.inference_state(state)
     labels = np.linspace(0, len(style_names) - 1, min(num, len(style_names))).round().astype(np.int32)
     gen = generate.generate_motion(state, layout, curve_Tx3, step_lib.latent_w(state, jnp.asarray(labels)))
     return viz.animate_motions(list(gen.positions), layout.parents, [style_names[i] for i in labels], path,

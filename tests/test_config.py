@@ -58,6 +58,8 @@ def test_override_types_and_errors():
     ("model.compute_dtype=float16", "model.compute_dtype"),
     ("model.phase_wavelengths_m=(1.0,0)", "model.phase_wavelengths_m"),
     ("model.phase_wavelengths_m=('long',)", "model.phase_wavelengths_m"),
+    ("train.g_ema_decay=1.0", "train.g_ema_decay"),
+    ("train.g_ema_decay=-0.1", "train.g_ema_decay"),
 ])
 def test_invalid_values_name_the_field(assignment, field):
     cfg = load_config(CONFIGS / "tiny.py")

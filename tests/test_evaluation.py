@@ -188,6 +188,7 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     report = json.loads((out / "report.json").read_text())
     h, r = report["header"], report["results"]
     assert h["evaluator_checksum"] == ev.checksum and h["checkpoint_step"] == 4
+    assert h["g_params"] == "raw"  # the tiny run keeps no moving average
     assert h["feet"] == ["LeftToeBase", "RightToeBase"]
     assert len(h["curve_counts"]) == 2 and "synthetic" in h["curve_counts"]
     assert sum(h["curve_counts"].values()) == len(h["curves"])

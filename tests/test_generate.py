@@ -22,17 +22,15 @@ import pytest
 from motiongan_jax import bvh, checkpoint, curves, generate as gen, ik, kinematics, representation, synthetic
 from motiongan_jax import step as step_lib
 from motiongan_jax import train as train_lib
-from motiongan_jax.config import load_config
+from motiongan_jax.config import load_config, override, to_dict
 
 T_LONG = 96
 SPEED = 1.2
 
 
-@pytest.fixture(scope="module")
-def run_dir(repo, tmp_path_factory):
-    """A checkpoint of the tiny config with seeded random parameters, saved as training saves one
+def _random_run(cfg, wd):
+    """A checkpoint of `cfg` with seeded random parameters, saved as training saves one
     (jax.eval_shape of init_state gives the structure without compiling the initialisers)."""
-    cfg = load_config(repo / "configs" / "tiny.py")
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     styles = tuple(sorted(synthetic.STYLES))
     dataset = types.SimpleNamespace(style_names=styles, layout=layout, fps=60.0, data_dir="<test>")
@@ -40,9 +38,13 @@ def run_dir(repo, tmp_path_factory):
     rng = np.random.default_rng(0)
     state = jax.tree.map(lambda s: rng.normal(0, 0.3, s.shape).astype(s.dtype)
                          if np.issubdtype(s.dtype, np.floating) else np.zeros(s.shape, s.dtype), like)
-    wd = tmp_path_factory.mktemp("gen_run")
     checkpoint.save(checkpoint.manager(wd / "checkpoints"), 4, state, train_lib.run_meta(cfg, dataset))
     return wd
+
+
+@pytest.fixture(scope="module")
+def run_dir(repo, tmp_path_factory):
+    return _random_run(load_config(repo / "configs" / "tiny.py"), tmp_path_factory.mktemp("gen_run"))
 
 
 @pytest.fixture(scope="module")
@@ -265,6 +267,42 @@ def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, ca
     np.testing.assert_allclose(representation.bone_lengths(
         (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
         atol=1e-6)
+
+
+def test_cli_params_choose_the_moving_average_or_the_raw_g(repo, cli, tmp_path):
+    cfg = override(load_config(repo / "configs" / "tiny.py"), ["train.g_ema_decay=0.999"])
+    wd = _random_run(cfg, tmp_path / "run")  # g_ema_params random too, so unlike g_params
+    common = ["--workdir", str(wd), "--style", "Happy", "--curve", "line", "--length", str((T_LONG - 1) * SPEED / 15 + 1e-6)]
+    out = {}
+    for name, extra in (("default", []), ("ema", ["--params", "ema"]), ("raw", ["--params", "raw"])):
+        assert cli([*common, *extra, "--out", str(tmp_path / f"{name}.npz")]) == 0
+        out[name] = np.load(tmp_path / f"{name}.npz")["positions"]
+    np.testing.assert_array_equal(out["default"], out["ema"])
+    assert np.abs(out["ema"] - out["raw"]).max() > 1e-3
+    # the same as a run without an average whose G holds the average's values
+    raw, meta, plain_cfg, _ = checkpoint.load_run(wd, params="raw")
+    plain_cfg = override(plain_cfg, ["train.g_ema_decay=0.0"])
+    plain = raw.replace(g_params=raw.g_ema_params, g_ema_params=None)
+    checkpoint.save(checkpoint.manager(tmp_path / "plain" / "checkpoints"), 4, plain,
+                    {**meta, "config": to_dict(plain_cfg)})
+    assert cli([*common, "--workdir", str(tmp_path / "plain"), "--out", str(tmp_path / "plain.npz")]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "plain.npz")["positions"], out["ema"])
+
+
+def test_a_checkpoint_from_before_the_moving_average_still_loads(run_dir, run, tmp_path):
+    """Checkpoints saved before TrainState had g_ema_params hold the other fields only."""
+    state, meta = run[0], checkpoint.read_meta(checkpoint.manager(run_dir / "checkpoints"))[1]
+    older = {f: getattr(state, f) for f in ("g_params", "d_params", "d_sn_state", "opt_g_state", "opt_d_state", "step")}
+    checkpoint.save(checkpoint.manager(tmp_path / "checkpoints"), 4, older, meta)
+    loaded = checkpoint.load_run(tmp_path)[0]
+    assert loaded.g_ema_params is None
+    for a, b in zip(jax.tree.leaves(loaded), jax.tree.leaves(state), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # a run that keeps an average cannot resume from it: the error names the checkpoint
+    cfg = override(run[2], ["train.g_ema_decay=0.9"])
+    like = jax.eval_shape(lambda: step_lib.init_state(cfg, run[3], len(NAMES), jax.random.key(0)))
+    with pytest.raises(checkpoint.CheckpointError, match="does not fit this model"):
+        checkpoint.restore(checkpoint.manager(tmp_path / "checkpoints"), 4, like)
 
 
 def test_cli_gif_and_list_styles(run_dir, cli, tmp_path, capsys):

@@ -426,3 +426,43 @@ def test_train_step_draws_phase_offsets_and_trains_the_phase_weights():
     k0 = state0.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
     k1 = state1.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
     assert float(jnp.abs(k1 - k0).min()) > 0  # every phase weight got a gradient
+
+
+def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged():
+    decay = 0.75
+    plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4)))
+    cfg = validate(dataclasses.replace(plain_cfg, train=dataclasses.replace(plain_cfg.train, g_ema_decay=decay)))
+    state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    assert step_lib.init_state(plain_cfg, LAYOUT, C, jax.random.key(0)).g_ema_params is None
+    assert _leaves_equal(state0.g_ema_params, state0.g_params)
+
+    def compiled(c, s):
+        return jax.jit(step_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
+            compiler_options=FAST)
+
+    step, plain_step = compiled(cfg, state0), compiled(plain_cfg, state0.replace(g_ema_params=None))
+    raw = [jax.tree.map(np.asarray, state0.g_params)]
+    state, plain = state0, state0.replace(g_ema_params=None)
+    for i in range(2):
+        state, _ = step(state, _batch(), jax.random.key(i))
+        plain, _ = plain_step(plain, _batch(), jax.random.key(i))
+        raw.append(jax.tree.map(np.asarray, state.g_params))
+    # the average never feeds back: G, D and both optimisers are those of a run without it
+    assert _leaves_equal((state.g_params, state.d_params, state.opt_g_state, state.opt_d_state),
+                         (plain.g_params, plain.d_params, plain.opt_g_state, plain.opt_d_state))
+    # e0 = p0, e_k = decay e_(k-1) + (1 - decay) p_k, in numpy
+    want = raw[0]
+    for p in raw[1:]:
+        want = jax.tree.map(lambda e, x: decay * e + (1 - decay) * x, want, p)
+    for got, exp in zip(jax.tree.leaves(state.g_ema_params), jax.tree.leaves(want)):
+        np.testing.assert_allclose(np.asarray(got), exp, rtol=1e-6, atol=1e-7)
+    assert not _leaves_equal(state.g_ema_params, state.g_params)
+    # generation takes the average unless asked for the raw parameters
+    assert _leaves_equal(step_lib.inference_state(state).g_params, state.g_ema_params)
+    assert _leaves_equal(step_lib.inference_state(state, "raw").g_params, state.g_params)
+    assert step_lib.inference_state(plain) is plain
+    with pytest.raises(ValueError, match="'ema' or 'raw'"):
+        step_lib.inference_state(state, "average")
+    # a state and a step that disagree about the average are refused at trace time
+    with pytest.raises(ValueError, match="g_ema_decay"):
+        jax.eval_shape(step_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))

@@ -26,8 +26,8 @@ def _params(workdir, step=None):
 
 
 def _assert_bit_identical(a, b):
-    la, lb = jax.tree.leaves((a.g_params, a.d_params, a.d_sn_state, a.opt_g_state, a.opt_d_state)), \
-        jax.tree.leaves((b.g_params, b.d_params, b.d_sn_state, b.opt_g_state, b.opt_d_state))
+    la, lb = jax.tree.leaves((a.g_params, a.d_params, a.d_sn_state, a.opt_g_state, a.opt_d_state, a.g_ema_params)), \
+        jax.tree.leaves((b.g_params, b.d_params, b.d_sn_state, b.opt_g_state, b.opt_d_state, b.g_ema_params))
     assert len(la) == len(lb)
     for x, y in zip(la, lb):
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
@@ -81,6 +81,25 @@ def test_resume_equals_unbroken_even_after_a_half_written_checkpoint(unbroken, t
     _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
     steps = [json.loads(x)["step"] for x in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     assert steps == [1, 2, 3, 4]
+
+
+def test_g_ema_is_checkpointed_resumed_and_used_for_generation(unbroken, tiny, tmp_path):
+    cfg = override(tiny, ["train.g_ema_decay=0.5"])
+    train_lib.train(cfg, tmp_path / "unbroken", progress=False, log=lambda s: None)
+    train_lib.train(override(cfg, ["train.num_steps=2"]), tmp_path / "resumed", progress=False, log=lambda s: None)
+    logs = []
+    train_lib.train(cfg, tmp_path / "resumed", progress=False, log=logs.append)
+    assert any("resumed from checkpoint at step 2" in s for s in logs)
+    raw, meta, _, _ = checkpoint.load_run(tmp_path / "unbroken", params="raw")
+    assert meta["config"]["train"]["g_ema_decay"] == 0.5
+    # the average is carried over the resume, bit for bit
+    _assert_bit_identical(raw, checkpoint.load_run(tmp_path / "resumed", params="raw")[0])
+    # and never feeds back: training is that of the run without it
+    _assert_bit_identical(_params(unbroken[0])[0], raw.replace(g_ema_params=None))
+    ema = checkpoint.load_run(tmp_path / "unbroken")[0]  # the default for generation and analysis
+    for got, want in zip(jax.tree.leaves(ema.g_params), jax.tree.leaves(raw.g_ema_params)):
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert not np.array_equal(np.asarray(jax.tree.leaves(ema.g_params)[0]), np.asarray(jax.tree.leaves(raw.g_params)[0]))
 
 
 def test_sigkill_and_restart_equals_unbroken(unbroken, repo, tmp_path):
