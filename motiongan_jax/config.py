@@ -145,7 +145,8 @@ class TrainConfig:
     keep_checkpoints: int = 3
     # Exponential moving average of G's parameters, used for generation, evaluation and analysis
     # (checkpoint.load_run; training itself never reads it). 0 keeps none (the paper); e.g. 0.999
-    # averages over about the last 1,000 steps, damping G's step-to-step oscillation.
+    # averages over about the last 1,000 steps, against G's step-to-step oscillation (at the cpu
+    # size: style accuracy level with the raw G, lower FMD; docs/RESULTS.md §7).
     g_ema_decay: float = 0.0
 
 
