@@ -10,6 +10,7 @@ pure function that merges them inside, so the caller can `jax.jit(..., donate_ar
     G update through the *updated* D, G not re-run:
                L_G = w_adv BCE(D(v̂, P̂)ᵃ, 0.9) + w_cls BCE(D(v̂, P̂)ᶜ, ŷ) + w_curve curve + w_bone bone
                dL/d(v̂, P̂) pulled back through the stored VJP of the single G forward; Adam step for G
+    with train.g_ema_decay d > 0: G's moving average e ← d e + (1 - d) θ_G, for generation only
 
 D runs three times (fake for D, real for D, fake for G, in that order) with `update_stats=True`,
 so its spectral-norm vectors advance three power iterations per step, as in the reference.
