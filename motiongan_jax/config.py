@@ -65,6 +65,7 @@ class DataConfig:
 OUTPUT_PRIORS = ("none", "rest_and_curve")
 G_FRAMES = ("world", "curve")
 D_FRAMES = ("world", "window")
+D_CONDS = ("none", "projection")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,6 +103,12 @@ class ModelConfig:
     # The frame D judges in: "world" (the paper) or "window" (small configs: each window turned so
     # that its travel points along +z, the evaluator's frame; nn/discriminator.py). Same parameters.
     d_frame: str = "world"
+    # What D's real/fake verdict sees of the style: "none" (the paper: an unconditional verdict;
+    # the style enters only through the class head, trained on real windows) or "projection"
+    # (small configs: the verdict also adds <V[label], features>, Miyato & Koyama 2018, so D judges
+    # whether a window is a real walk *of that style*; fakes are judged with the label G was asked
+    # for). Adds one spectral-norm linear map (8·top·T/16 -> styles) to D.
+    d_cond: str = "none"
     # Gait-phase input (small configs; () is the paper's G): wavelengths in metres of walked
     # distance. G also sees sin and cos of 2 pi s[t] / wavelength + offset for each, s[t] being
     # the distance along the input curve and the offsets random per training sample, so a
@@ -173,9 +180,11 @@ def load_config(path: str | Path, check: bool = True) -> Config:
     return validate(cfg) if check else cfg
 
 
-def _parse_value(text: str, current: Any, field: str) -> Any:
+def _parse_value(text: str, current: Any, field: str, nullable: bool = True) -> Any:
     if current is None or isinstance(current, str):
-        if text.lower() in ("none", "null"):
+        # "none" is a value of some string options (model.output_prior, model.d_cond), so it
+        # means None only where the field may be None
+        if nullable and text.lower() in ("none", "null"):
             return None
         return text
     if isinstance(current, bool) and text.lower() in ("true", "false"):
@@ -214,10 +223,10 @@ def override(cfg: Config, assignments: list[str]) -> Config:
         if len(parts) != 2 or parts[0] not in ("data", "model", "train"):
             raise ConfigError(f"unknown config field {key!r} (use data.X, model.X or train.X)")
         section = getattr(cfg, parts[0])
-        names = {f.name for f in dataclasses.fields(section)}
-        if parts[1] not in names:
-            raise ConfigError(f"unknown config field {key!r}; {parts[0]} has: {', '.join(sorted(names))}")
-        value = _parse_value(text, getattr(section, parts[1]), key)
+        types = {f.name: str(f.type) for f in dataclasses.fields(section)}
+        if parts[1] not in types:
+            raise ConfigError(f"unknown config field {key!r}; {parts[0]} has: {', '.join(sorted(types))}")
+        value = _parse_value(text, getattr(section, parts[1]), key, nullable="None" in types[parts[1]])
         cfg = dataclasses.replace(cfg, **{parts[0]: dataclasses.replace(section, **{parts[1]: value})})
     return cfg
 
@@ -257,6 +266,7 @@ def validate(cfg: Config) -> Config:
     need(all(isinstance(x, (int, float)) and x > 0 for x in m.phase_wavelengths_m), "model.phase_wavelengths_m",
          "wavelengths must be positive numbers of metres")
     need(m.d_frame in D_FRAMES, "model.d_frame", f"one of {', '.join(D_FRAMES)}")
+    need(m.d_cond in D_CONDS, "model.d_cond", f"one of {', '.join(D_CONDS)}")
     need(m.conv_impl in ("fast", "xla"), "model.conv_impl", "one of fast, xla")
     need(m.compute_dtype in ("float32", "bfloat16"), "model.compute_dtype", "one of float32, bfloat16")
     need(t.batch_size >= 1, "train.batch_size", "must be >= 1")

@@ -324,7 +324,9 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
     ev_ratio = metrics.explained_variance(np.asarray(fit.flat_samples[0]))
     # a straight line of L samples at the held-out median spacing, for interpolation/arithmetic
     line = next((c for c in ctx.curves_ if c.name == "line"), ctx.curves_[0]).curve_Lx3
-    out = {"nearest_centroid_accuracy": nc_acc, "pca_explained_2": float(np.sum(ev_ratio[:2])),
+    # the first component alone shows a style code collapsed onto one line (docs/RESULTS.md §8)
+    out = {"nearest_centroid_accuracy": nc_acc, "pca_explained_1": float(ev_ratio[0]),
+           "pca_explained_2": float(np.sum(ev_ratio[:2])),
            "pca_explained": ev_ratio[:5].tolist()}
     if C >= 2:
         alphas = np.linspace(0.0, 1.0, s.interp_steps)
@@ -499,6 +501,7 @@ ROWS = [
     ("ground_penetration", f"frames with a toe > {PENETRATION_TOLERANCE_M * 100:.0f} cm below the floor"),
     ("jerk_ratio", "jerk ratio (generated / real)"),
     ("nearest_centroid_accuracy", "w nearest-centroid accuracy"),
+    ("pca_explained_1", "w PCA: variance explained by 1 component"),
     ("pca_explained_2", "w PCA: variance explained by 2 components"),
     ("interp_monotonicity", "interpolation monotonicity (Spearman)"),
     ("arithmetic_agreement", "arithmetic A-B+C classified as A or C"),

@@ -101,7 +101,8 @@ def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key, imp
              dtype: str = "float32") -> Discriminator:
     return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
                          kw=model_cfg.kw, length_unit=model_cfg.length_unit, impl=impl,
-                         compute_dtype=dtype, frame=model_cfg.d_frame, rngs=nnx.Rngs(key))
+                         compute_dtype=dtype, frame=model_cfg.d_frame, cond=model_cfg.d_cond,
+                         rngs=nnx.Rngs(key))
 
 
 def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=None, *,
@@ -221,13 +222,14 @@ def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:
 
 
 def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR,
-             labels_B, train_cfg) -> dict[str, jax.Array]:
+             labels_B, train_cfg, fake_labels_B=None) -> dict[str, jax.Array]:
     """D's loss terms; the fake is detached here, so no gradient can reach G through them.
-    Calls D twice (fake, then real), advancing its spectral-norm vectors each time."""
+    Calls D twice (fake, then real), advancing its spectral-norm vectors each time. A projection
+    D judges the fakes as `fake_labels_B` (the styles G was asked for) and the reals as `labels_B`."""
     mode = train_cfg.gan_loss
     adv_f, _ = d(jax.lax.stop_gradient(fake_vel_BxTx3), jax.lax.stop_gradient(fake_pose_BxTxR),
-                 update_stats=True)
-    adv_r, cls_r = d(real_vel_BxTx3, real_pose_BxTxR, update_stats=True)
+                 update_stats=True, labels_B=fake_labels_B)
+    adv_r, cls_r = d(real_vel_BxTx3, real_pose_BxTxR, update_stats=True, labels_B=labels_B)
     adv_fake = losses.adversarial_loss(adv_f, losses.FAKE_TARGET, mode)
     adv_real = losses.adversarial_loss(adv_r, losses.REAL_TARGET, mode)
     cls = losses.class_loss(cls_r, labels_B, mode)
@@ -248,7 +250,7 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, c
              bone_pairs, bone_lengths_m, train_cfg, length_unit: float) -> dict[str, jax.Array]:
     """G's loss terms (one D call). Curve and bone losses are in units of length_unit."""
     t = train_cfg
-    adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True)
+    adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True, labels_B=fake_labels_B)
     adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
     cls = losses.class_loss(cls_f, fake_labels_B, t.gan_loss)
     curve = losses.curve_loss(fake_vel_BxTx3, curve_BxTx3, t.curve_points, length_unit)
@@ -335,7 +337,7 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         # --- D update on the detached fake and the real batch --------------------------------
         def d_objective(d_params):
             d = nnx.merge(state.d_def, d_params, state.d_sn_state, copy=True)
-            terms = d_losses(d, *fake, real_vel, real_pose, batch["label_B"], tcfg)
+            terms = d_losses(d, *fake, real_vel, real_pose, batch["label_B"], tcfg, fake_labels)
             return terms["d_total"], (terms, nnx.state(d, SpectralNormState))
 
         (_, (d_terms, sn)), d_grads = jax.value_and_grad(d_objective, has_aux=True)(state.d_params)

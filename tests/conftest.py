@@ -43,9 +43,11 @@ def _compilation_cache(tmp_path_factory):
     path = shared / "jax_compilation_cache"
     path.mkdir(exist_ok=True)
     old = os.environ.get("JAX_COMPILATION_CACHE_DIR")
+    old_config = jax.config.jax_compilation_cache_dir
     os.environ["JAX_COMPILATION_CACHE_DIR"] = str(path)
     jax.config.update("jax_compilation_cache_dir", str(path))
     yield
+    jax.config.update("jax_compilation_cache_dir", old_config)
     if old is None:
         os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
     else:

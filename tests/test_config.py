@@ -38,6 +38,10 @@ def test_override_types_and_errors():
     assert cfg2.train.batch_size == 8 and cfg2.train.lr_g == 0.001 and cfg2.data.rotate is False
     assert cfg2.data.fps_factors == (1.0,) and cfg2.name == "x"
     assert override(cfg, ["model.phase_wavelengths_m=1.2"]).model.phase_wavelengths_m == (1.2,)
+    # "none" is a value of string options, and None only for fields that may be None
+    assert override(cfg, ["model.d_cond=none"]).model.d_cond == "none"
+    assert override(cfg, ["model.output_prior=none"]).model.output_prior == "none"
+    assert override(cfg, ["data.data_dir=/x", "data.data_dir=none"]).data.data_dir is None
     assert config_hash(cfg) != config_hash(cfg2)
     assert config_hash(cfg) == config_hash(load_config(CONFIGS / "tiny.py"))
     with pytest.raises(ConfigError, match="train.nope"):
@@ -56,6 +60,7 @@ def test_override_types_and_errors():
     ("train.curve_points=3", "train.curve_points"),
     ("model.conv_impl=cudnn", "model.conv_impl"),
     ("model.compute_dtype=float16", "model.compute_dtype"),
+    ("model.d_cond=concat", "model.d_cond"),
     ("model.phase_wavelengths_m=(1.0,0)", "model.phase_wavelengths_m"),
     ("model.phase_wavelengths_m=('long',)", "model.phase_wavelengths_m"),
     ("train.g_ema_decay=1.0", "train.g_ema_decay"),

@@ -198,6 +198,8 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
                 "interp_monotonicity", "arithmetic_agreement"):
         assert key in gen and len(gen[key]["per_seed"]) == 3, key
     assert 0.0 <= gen["sra_top1"]["mean"] <= 1.0
+    for p1, p2 in zip(gen["pca_explained_1"]["per_seed"], gen["pca_explained_2"]["per_seed"]):
+        assert 0.0 < p1 <= p2 <= 1.0 + 1e-6
     # the real row: real motion has its own bone lengths and walks its own curve
     assert r["real"]["bone_length_error"] < 1e-3
     assert r["real"]["facing_error_deg"] < 10.0  # real walkers face where they go, up to pelvis sway

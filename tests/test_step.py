@@ -325,6 +325,49 @@ def test_window_frame_d_gives_the_same_verdict_for_every_rotation():
         validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, d_frame="body")))
 
 
+def test_projection_d_judges_each_window_as_its_label():
+    """model.d_cond = projection: the verdict is the paper D's plus <V[y], flat>, with y the
+    label the window is judged as; the paper's layers start from the same values; the step
+    judges fakes as the labels G was asked for, and a projection D without labels is refused."""
+    from motiongan_jax.nn.discriminator import flatten_channel_major
+    from motiongan_jax.nn.layers import leaky_relu
+
+    cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, d_cond="projection")))
+    d = step_lib._build_d(cfg.model, T, J, C, jax.random.key(0))
+    d0 = step_lib._build_d(CFG.model, T, J, C, jax.random.key(0))
+    shared = {k: v for k, v in nnx.to_pure_dict(nnx.state(d, nnx.Param)).items() if k != "l_proj"}
+    assert _leaves_equal(shared, nnx.to_pure_dict(nnx.state(d0, nnx.Param)))
+    batch = _batch()
+    vel = jnp.diff(batch["root_BxTx3"], axis=1, prepend=batch["root_BxTx3"][:, :1])
+    pose = batch["pose_BxTxR"]
+    a0, c0 = d0(vel, pose, update_stats=False)
+    x = leaky_relu(d.c3_0(leaky_relu(d.c2_0(d.features(vel, pose)))))
+    proj_BxC = np.asarray(flatten_channel_major(x) @ d.l_proj.weight(update_stats=False))
+    for c in range(C):
+        a, cls = d(vel, pose, update_stats=False, labels_B=jnp.full((B,), c))
+        np.testing.assert_allclose(np.asarray(a), np.asarray(a0) + proj_BxC[:, c], rtol=1e-5, atol=1e-5)
+        np.testing.assert_array_equal(np.asarray(cls), np.asarray(c0))
+    assert np.ptp(proj_BxC, axis=1).min() > 1e-3  # the label matters
+    with pytest.raises(ValueError, match="needs labels_B"):
+        d(vel, pose, update_stats=False)
+    # d_losses: the fakes' verdict follows fake_labels_B; the paper's D ignores them
+    def fake_term(model_cfg, fake_labels):
+        dd = step_lib._build_d(model_cfg, T, J, C, jax.random.key(0))
+        return float(step_lib.d_losses(dd, vel, pose, batch["root_BxTx3"], pose, batch["label_B"], cfg.train,
+                                       jnp.array(fake_labels, jnp.int32))["d_adv_fake"])
+    assert abs(fake_term(cfg.model, [2, 3]) - fake_term(cfg.model, [0, 1])) > 1e-4
+    assert fake_term(CFG.model, [2, 3]) == fake_term(CFG.model, [0, 1])
+    # and the whole step trains with it
+    state = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    train_step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, jax.random.key(7)).compile(
+        compiler_options=FAST)
+    state, metrics = train_step(state, batch, jax.random.key(7))
+    assert all(np.isfinite(float(v)) for v in metrics.values())
+    assert float(jnp.abs(state.d_params["l_proj"]["kernel"] - d.l_proj.kernel[...]).max()) > 0  # V is trained
+    with pytest.raises(ValueError, match="d_cond"):
+        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, d_cond="concat")))
+
+
 def test_project_bones_by_hand_and_identity_on_valid_poses():
     from motiongan_jax import synthetic
     from motiongan_jax.nn.generator import project_bones

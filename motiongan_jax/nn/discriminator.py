@@ -25,6 +25,13 @@ of its root velocities) points along +z, the evaluator's canonical frame. D's ve
 the same for every rotation of a window, so it need not learn each direction the rotation
 augmentation draws. Same parameters.
 
+Projection (model.d_cond = "projection", small configs; "none" is the paper's D): the real/fake
+logit gains <V[y], flat>, V a spectral-norm linear map from the flattened features to one row per
+style (Miyato & Koyama 2018), y the window's label: the real label for real windows, the
+requested one for fakes. The class head still classifies; the verdict now asks "a real walk of
+style y?", which G cannot pass with a neighbouring style's posture. Built after the paper's
+layers, so their initial values do not change.
+
 `impl`: "fast" (default) or "xla", the convolution schedule of `conv.conv2d`; same results.
 `compute_dtype="bfloat16"`: bf16 convolutions and activations, float32 parameters and heads.
 """
@@ -38,10 +45,11 @@ import jax.numpy as jnp
 from flax import nnx
 
 from motiongan_jax import curves
-from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, uniform_init
+from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, uniform_init, zeros_init
 
 PADDED_ROWS = 81
 FRAMES = ("world", "window")
+CONDS = ("none", "projection")
 
 
 def window_frame(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -71,11 +79,15 @@ class Discriminator(nnx.Module):
         impl: str = "fast",
         compute_dtype: str = "float32",
         frame: str = "world",
+        cond: str = "none",
         rngs: nnx.Rngs,
     ):
         if frame not in FRAMES:
             raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+        if cond not in CONDS:
+            raise ValueError(f"cond must be one of {CONDS}, got {cond!r}")
         self.frame = frame
+        self.cond = cond
         if not 1 <= num_joints <= PADDED_ROWS // 3:
             raise ValueError(f"num_joints must be in 1..{PADDED_ROWS // 3}, got {num_joints}")
         if seq_len % 16:
@@ -102,6 +114,9 @@ class Discriminator(nnx.Module):
 
         self.l_last = sn_linear(1)
         self.l_cls = sn_linear(num_styles)
+        # a zero bias: the verdict starts without a per-style offset (it may learn one)
+        self.l_proj = (Dense(feat, num_styles, kernel_init=normal_init(0.02), bias_init=zeros_init,
+                             spectral_norm=True, rngs=rngs) if cond == "projection" else None)
 
     def _input(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
         b, t, r = pose_BxTxR.shape
@@ -125,8 +140,12 @@ class Discriminator(nnx.Module):
             return leaky_relu(self.c1_0(x, update_stats=update_stats))
 
     def __call__(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
-                 update_stats: bool) -> tuple[jax.Array, jax.Array]:
-        """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business."""
+                 update_stats: bool, labels_B: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business.
+        `labels_B` (int): the style each window is judged as; required by a projection D, ignored
+        by the paper's."""
+        if self.cond == "projection" and labels_B is None:
+            raise ValueError("a projection D (model.d_cond = 'projection') needs labels_B")
         x = self.features(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
         with jax.named_scope("D"):
             x = leaky_relu(self.c2_0(x, update_stats=update_stats))
@@ -134,4 +153,7 @@ class Discriminator(nnx.Module):
             flat = flatten_channel_major(x).astype(jnp.float32)
             adv_B = self.l_last(flat, update_stats=update_stats)[:, 0]
             cls_BxC = self.l_cls(flat, update_stats=update_stats)
+            if self.l_proj is not None:
+                proj_BxC = self.l_proj(flat, update_stats=update_stats)
+                adv_B = adv_B + jnp.take_along_axis(proj_BxC, labels_B.astype(jnp.int32)[:, None], axis=1)[:, 0]
         return adv_B, cls_BxC
