@@ -29,7 +29,7 @@ Projection (model.d_cond = "projection", small configs; "none" is the paper's D)
 logit gains <V[y], flat>, V a spectral-norm linear map from the flattened features to one row per
 style (Miyato & Koyama 2018), y the window's label: the real label for real windows, the
 requested one for fakes. The class head still classifies; the verdict now asks "a real walk of
-style y?", which G cannot pass with a neighbouring style's posture. Built after the paper's
+style y?", which a neighbouring style's posture should fail. Built after the paper's
 layers, so their initial values do not change.
 
 `impl`: "fast" (default) or "xla", the convolution schedule of `conv.conv2d`; same results.
