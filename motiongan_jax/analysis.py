@@ -103,6 +103,11 @@ class StyleCodes:
 _latent_w = jax.jit(step_lib.latent_w)
 
 
+def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
+    """w = LT(label, z) for each row (jitted on G's part of the state only)."""
+    return _latent_w(_g_only(state), jnp.asarray(labels_B, jnp.int32), jnp.asarray(z_BxZ, jnp.float32))
+
+
 def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None, *,
                 use_z: str = "transform") -> StyleCodes:
     """w at z = 0 and K codes per label (z ~ N(0, I) from `key`, default key 0)."""

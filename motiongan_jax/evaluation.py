@@ -291,7 +291,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
     rows, win_logits, win_feats, win_labels, mm_groups = [], [], [], [], []
     for ci, c in enumerate(ctx.curves_):
         z = jax.random.normal(jax.random.fold_in(key, ci), (C * s.k, Z), jnp.float32)
-        w = analysis._latent_w(analysis._g_only(ctx.state), jnp.asarray(labels), z)
+        w = analysis.latent_codes(ctx.state, labels, z)
         gen = generate.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, np.asarray(w))
         root = gen.positions[:, :, 0]
         r, p, n = cut_windows(root, gen.pose, T)

@@ -120,6 +120,11 @@ def test_style_codes_and_gait_parameters(run):
     labels = jnp.arange(len(names))
     np.testing.assert_allclose(codes.zero_CxW, A.step_lib.generator(state).style(
         labels, jnp.zeros((len(names), cfg.model.z_dim))), rtol=1e-5, atol=1e-9)
+    z = jax.random.normal(jax.random.key(5), (len(names), cfg.model.z_dim))
+    w = A.latent_codes(state, labels, z)
+    chex.assert_shape(w, (len(names), W))
+    np.testing.assert_allclose(w, A.step_lib.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
+    assert not np.allclose(w, codes.zero_CxW)  # z reaches w
     gait = A.gait_parameters(meta, cfg)
     assert gait["param_names"] == list(synthetic.PARAM_NAMES) + ["speed"]
     want = [[getattr(synthetic.STYLES[s], n) for n in synthetic.PARAM_NAMES] + [synthetic.STYLES[s].speed]
