@@ -22,7 +22,7 @@ together, not either alone, raised seed 0 from 0.45 to 0.65 top-1, §8), and `mo
 (G's bones keep its directions and take the skeleton's lengths: the bone-length error falls from
 43-52% to zero; on three seeds the style scores end level and are higher and steadier over the
 last 5,000 steps, interpolation is more monotonic, z matters less and FMD is lower on two seeds, §9).
-10,000 steps take about 25 minutes alone on the 2 cores.
+10,000 steps take about 26 minutes alone on the 2 cores.
 """
 
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig
