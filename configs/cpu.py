@@ -19,9 +19,10 @@ Latent Transform init every style code w lay on one line, the second direction u
 the first, so G had one number per style; a projection D judges each window as a walk of its
 label instead of leaving the style to a class head that G fooled on 100% of its windows; the two
 together, not either alone, raised seed 0 from 0.45 to 0.65 top-1, §8), and `model.exact_bones`
-(G's bones keep its directions and take the skeleton's lengths: the bone-length error falls from
-43-52% to zero; on three seeds the style scores end level and are higher and steadier over the
-last 5,000 steps, interpolation is more monotonic, z matters less and FMD is lower on two seeds, §9).
+(G's bones keep the directions G outputs and take the skeleton's lengths: the bone-length error
+falls from 43-52% to zero; on three seeds the style scores end level and are higher and steadier
+over the last 5,000 steps, interpolation is more monotonic, z matters less and FMD is lower on
+two seeds, §9).
 10,000 steps take about 26 minutes alone on the 2 cores.
 """
 

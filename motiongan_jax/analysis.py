@@ -114,16 +114,15 @@ def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array |
     C = len(style_names)
     if C < 1 or k < 1:
         raise ValueError(f"need at least one style and k >= 1 (got {C} styles, k={k})")
-    gs = _g_only(state)
     Z = step_lib.generator_z_dim(state)
     labels = jnp.arange(C, dtype=jnp.int32)
-    zero = _latent_w(gs, labels, jnp.zeros((C, Z), jnp.float32))
+    zero = latent_codes(state, labels, jnp.zeros((C, Z), jnp.float32))
     rep = jnp.repeat(labels, k)
     if use_z == "zeros":
         z = jnp.zeros((C * k, Z), jnp.float32)
     else:
         z = jax.random.normal(jax.random.key(0) if key is None else key, (C * k, Z), jnp.float32)
-    samples = _latent_w(gs, rep, z).reshape(C, k, -1)
+    samples = latent_codes(state, rep, z).reshape(C, k, -1)
     chex.assert_shape(samples, (C, k, zero.shape[-1]))
     return StyleCodes(tuple(style_names), zero, samples)
 
