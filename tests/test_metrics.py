@@ -304,6 +304,92 @@ def test_skate_ratio():
 
 
 # ---------------------------------------------------------------------------------------------
+# Gait: a walker, a glider, a floater, a hopper
+
+
+def _walker(seconds=10.0, fps=30.0, cycle_hz=0.9, speed=1.2, stance=0.6, lift=0.1):
+    """Toe tracks (T, 2, 3) of an ideal walk: each toe is planted (height 0, not moving) for
+    `stance` of its gait cycle and swings forward in the rest, a minimum-jerk stride along the
+    floor under a half-sine of height `lift` (it lifts before it speeds up); the right toe runs
+    half a cycle behind the left. Both keep pace with a body at `speed`."""
+    t = np.arange(int(seconds * fps)) / fps
+    stride = speed / cycle_hz
+    toes = np.zeros((len(t), 2, 3))
+    for k, shift in enumerate((0.0, 0.5)):
+        u = t * cycle_hz + shift
+        cycle, frac = np.floor(u), u - np.floor(u)
+        swing = np.clip((frac - stance) / (1 - stance), 0.0, 1.0)  # 0 in stance, 0 -> 1 in swing
+        ahead = swing**3 * (10 - 15 * swing + 6 * swing**2)
+        toes[:, k, 2] = (cycle + ahead) * stride  # forward: one stride per cycle, only in swing
+        toes[:, k, 1] = lift * np.sin(np.pi * swing)
+        toes[:, k, 0] = 0.1 if k == 0 else -0.1
+    return toes
+
+
+def test_gait_of_an_ideal_walker():
+    fps = 30.0
+    toes = _walker(fps=fps)
+    h = M.toe_heights(toes)
+    chex.assert_shape(h, (len(toes), 2))
+    assert M.support(h, 0.02) == 1.0  # stance 0.6 > 0.5: a foot is always down
+    assert M.lower_foot_height(h) == 0.0
+    assert M.alternation(h) > 0.4
+    assert M.step_frequency_hz(h, fps) == pytest.approx(0.9, rel=0.01)
+    assert M.foot_skate_original(toes[::2]) == 0.0  # planted toes do not move (15 Hz samples)
+    assert M.skate_ratio(toes, fps, 0.02) == 0.0
+    assert M.height_range_m(np.stack([np.zeros(10), np.full(10, 0.9), np.zeros(10)], -1)) == 0.0
+
+
+def test_gait_of_a_glider_a_floater_and_a_hopper():
+    fps, T = 30.0, 300
+    t = np.arange(T) / fps
+    # glider: both toes slide at 1.2 m/s at a constant height (the clip's floor): always in
+    # contact, so every contact slides; no steps at all
+    glide = np.zeros((T, 2, 3))
+    glide[:, :, 2] = 1.2 * t[:, None]
+    glide[:, 1, 0] = -0.2
+    h = M.toe_heights(glide)
+    assert M.support(h, 0.02) == 1.0 and M.lower_foot_height(h) == 0.0
+    assert math.isnan(M.alternation(h)) and math.isnan(M.step_frequency_hz(h, fps))
+    assert M.skate_ratio(glide, fps, 0.02) == 1.0
+    # floater: a walker whose whole body rises 0.4 m over the clip; above the floor (the 5th
+    # percentile of the lower toe, near the start) the lower toe's mean height is ~0.2 m
+    float_ = _walker(seconds=T / fps, fps=fps)
+    float_[..., 1] += np.linspace(0.0, 0.4, T)[:, None]
+    h = M.toe_heights(float_)
+    assert M.lower_foot_height(h) == pytest.approx(0.2 - np.percentile(np.linspace(0.0, 0.4, T), 5), abs=0.01)
+    # the floor is 0.02 m up the rise (its 5th percentile): a toe within 2 cm of it only while the
+    # rise is below 0.04 m, the first 10 % of the clip
+    assert M.support(h, 0.02) == pytest.approx(0.1, abs=0.01)
+    # hopper: both feet together, airborne (a half-sine of 0.1 m) half of each 1 Hz cycle; sampled
+    # finely so that the share of frames is the share of time
+    t = np.arange(3000) / 300.0
+    hop = np.zeros((len(t), 2, 3))
+    frac = (t * 1.0) % 1.0
+    hop[:, :, 1] = (0.1 * np.sin(np.pi * np.clip(2 * frac - 1, 0, 1)))[:, None]
+    hop[:, 1, 0] = -0.2
+    h = M.toe_heights(hop)
+    assert M.alternation(h) == pytest.approx(-1.0)
+    # on the floor (below 2 cm) for the grounded half plus the first and last 6.4 % of the flight
+    assert M.support(h, 0.02) == pytest.approx(0.5 + 0.5 * 2 * np.arcsin(0.2) / np.pi, abs=0.02)
+    assert M.step_amplitude_m(h) == 0.0 and math.isnan(M.step_frequency_hz(h, 300.0))
+
+
+@pytest.mark.parametrize("cycle_hz, fps, seconds", [(0.5, 15.0, 8.5), (0.93, 15.0, 8.5), (1.25, 30.0, 4.3),
+                                                   (2.0, 60.0, 3.0)])
+def test_step_frequency_of_sinusoidal_steps(cycle_hz, fps, seconds):
+    # left - right toe height = 0.1 sin(2π f t + 0.3) plus a slow drift of both: f, to 2 %, even
+    # over a few cycles (the drift is removed with the linear trend)
+    t = np.arange(int(seconds * fps)) / fps
+    s = 0.05 * np.sin(2 * np.pi * cycle_hz * t + 0.3)
+    h = np.stack([0.05 + s, 0.05 - s], -1) + 0.02 * t[:, None]
+    assert M.step_frequency_hz(h, fps) == pytest.approx(cycle_hz, rel=0.02)
+    assert M.step_amplitude_m(h) == pytest.approx(0.1 / np.sqrt(2), rel=0.05)
+    # a clip shorter than one cycle of the band's lowest frequency (0.4 Hz): unknown
+    assert math.isnan(M.step_frequency_hz(h[: int(2.4 * fps)], fps))
+
+
+# ---------------------------------------------------------------------------------------------
 # Skeleton validity, smoothness
 
 
@@ -502,6 +588,13 @@ BAD_INPUTS = [
     (lambda: M.explained_variance(np.ones((4, 3))), "X_NxD.*zero variance"),
     (lambda: M.explained_variance(np.ones(4)), "X_NxD.*rank"),
     (lambda: M.mean_ci95([]), "values.*empty"),
+    (lambda: M.toe_heights(np.zeros((5, 2))), "toes_world_Tx2x3.*rank"),
+    (lambda: M.toe_heights(_TOES, floor_percentile=-1), "floor_percentile"),
+    (lambda: M.support(np.zeros((5, 2)), 0.0), "contact_height_m"),
+    (lambda: M.alternation(np.zeros((5, 3))), "heights_Tx2.*size 2"),
+    (lambda: M.step_frequency_hz(np.zeros((50, 2)), 0.0), "fps"),
+    (lambda: M.step_frequency_hz(np.zeros((50, 2)), 30.0, band_hz=(2.0, 1.0)), "band_hz"),
+    (lambda: M.height_range_m(np.zeros((5, 2))), "root_Tx3.*size 3"),
 ]
 
 
