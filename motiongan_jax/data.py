@@ -18,10 +18,12 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.ndimage import gaussian_filter1d, uniform_filter1d
+from scipy.signal import hilbert
 
-from motiongan_jax import atomic, bvh, curves, kinematics
+from motiongan_jax import atomic, bvh, curves, kinematics, metrics
 from motiongan_jax.config import DataConfig
-from motiongan_jax.representation import UNITS_TO_M, RowLayout, layout_from_skeleton, to_rows
+from motiongan_jax.representation import UNITS_TO_M, RowLayout, foot_joints, from_rows, layout_from_skeleton, to_rows
 
 # Bump when preprocessing changes what it computes: part of every cache key.
 CACHE_VERSION = "1"
@@ -207,6 +209,8 @@ class ClipArrays:
     clip_label_C: jax.Array
     window_clip_W: jax.Array  # clip index of every training window
     window_start_W: jax.Array  # start frame inside its clip
+    phase_N: jax.Array  # gait phase of every frame, radians (clip_gait_phase)
+    phase_valid_N: jax.Array  # whether that phase is measured (bool)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -290,6 +294,81 @@ def load_dataset(cfg: DataConfig, *, use_cache: bool = True, log=None) -> Datase
     return Dataset(style_names, layout, float(train[0].fps), train, val, str(data_dir))
 
 
+# ----------------------------------------------------------------------------------------------
+# Gait statistics of real clips (what the gait terms of training aim at)
+# ----------------------------------------------------------------------------------------------
+
+CONTACT_PERCENTILE = 10.0  # contact height: this percentile of real toe heights above the floor ...
+CONTACT_MARGIN_M = 0.02  # ... plus this
+SPEED_SMOOTHING_S = 0.5  # the pelvis path is smoothed over this (Gaussian sigma) to drop its sway
+
+
+@dataclasses.dataclass(frozen=True)
+class GaitTargets:
+    stride_m_C: tuple[float, ...]  # each style's median stride length (one left and one right step)
+    contact_height_m: float  # a toe this close to the floor counts as planted
+    toe_joints: tuple[int, int]  # kept-joint indices of the left and right toe
+
+
+def clip_toe_heights(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> np.ndarray:
+    """Heights (F, 2) of the two toes above the clip's floor (metrics.toe_heights)."""
+    return metrics.toe_heights(np.asarray(from_rows(clip.root_Fx3, clip.pose_FxR, layout))[:, list(toes)])
+
+
+def clip_stride_m(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> float:
+    """Stride length of a clip: its walking speed (the smoothed pelvis path's length over the
+    clip's duration) over its step frequency (metrics.step_frequency_hz); nan without steps."""
+    freq = metrics.step_frequency_hz(clip_toe_heights(clip, layout, toes), clip.fps)
+    xz = gaussian_filter1d(np.asarray(clip.root_Fx3, np.float64)[:, [0, 2]], SPEED_SMOOTHING_S * clip.fps,
+                           axis=0, mode="nearest")
+    speed = np.sum(np.linalg.norm(np.diff(xz, axis=0), axis=1)) * clip.fps / (len(xz) - 1)
+    return float(speed / freq) if np.isfinite(freq) and freq > 0 else float("nan")
+
+
+PHASE_DETREND_S = 2.0  # the toe-height difference minus its moving average over this ...
+PHASE_SMOOTHING_S = 0.04  # ... smoothed over this (Gaussian sigma), before its Hilbert phase
+PHASE_MIN_AMPLITUDE = 0.3  # frames whose step amplitude is below this share of the clip's median have no phase
+
+
+def clip_gait_phase(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(phase_F radians, valid_F bool): the gait phase of every frame, measured without annotation:
+    the unwrapped angle of the analytic signal (Hilbert transform) of left − right toe height,
+    detrended and smoothed. It rises 2π per gait cycle and is 0 where the left toe is highest above
+    the right. Frames where the steps fade (standing, a start or a stop) are not `valid`: their
+    angle is noise."""
+    h = clip_toe_heights(clip, layout, toes)
+    d = h[:, 0] - h[:, 1]
+    d = d - uniform_filter1d(d, max(int(round(PHASE_DETREND_S * clip.fps)), 1), mode="nearest")
+    d = gaussian_filter1d(d, PHASE_SMOOTHING_S * clip.fps, mode="nearest")
+    analytic = hilbert(d)
+    amplitude = np.abs(analytic)
+    valid = amplitude > PHASE_MIN_AMPLITUDE * max(float(np.median(amplitude)), 1e-9)
+    return np.unwrap(np.angle(analytic)).astype(np.float32), valid
+
+
+def contact_height(clips: list[Clip], layout: RowLayout, toes: tuple[int, int]) -> float:
+    """The contact height (metres) calibrated on real clips: CONTACT_PERCENTILE of their toe
+    heights above each clip's floor, pooled, plus CONTACT_MARGIN_M."""
+    heights = np.concatenate([clip_toe_heights(c, layout, toes).ravel() for c in clips])
+    return metrics.contact_height_threshold(heights, CONTACT_PERCENTILE) + CONTACT_MARGIN_M
+
+
+def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLayout) -> GaitTargets:
+    """Stride lengths per style (median over its clips) and the contact height, measured on real
+    clips without annotation. A style none of whose clips shows a step frequency is an error."""
+    toes = foot_joints(layout)
+    by_style: dict[str, list[float]] = {s: [] for s in style_names}
+    for clip in clips:
+        by_style[clip.label.style].append(clip_stride_m(clip, layout, toes))
+    strides = []
+    for style in style_names:
+        vals = [v for v in by_style[style] if np.isfinite(v)]
+        if not vals:
+            raise DataError(f"style {style!r}: no clip with a measurable step frequency (no stride length)")
+        strides.append(float(np.median(vals)))
+    return GaitTargets(tuple(strides), contact_height(clips, layout, toes), toes)
+
+
 def max_step(cfg: DataConfig) -> int:
     return max(1, int(np.floor(cfg.frame_step * max(cfg.fps_factors if cfg.augment_fps else (1.0,)))))
 
@@ -316,6 +395,7 @@ def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfi
         raise DataError(
             f"no clip is longer than data.frame_nums = {cfg.frame_nums} frames (longest: {longest}); "
             "lower frame_nums or frame_step")
+    phases = [clip_gait_phase(c, c.layout, foot_joints(c.layout)) for c in clips]
     return ClipArrays(
         root_Nx3=jnp.asarray(np.concatenate([c.root_Fx3 for c in clips])),
         pose_NxR=jnp.asarray(np.concatenate([c.pose_FxR for c in clips])),
@@ -324,6 +404,8 @@ def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfi
         clip_label_C=jnp.asarray(labels, jnp.int32),
         window_clip_W=jnp.asarray(w_clip, jnp.int32),
         window_start_W=jnp.asarray(w_start, jnp.int32),
+        phase_N=jnp.asarray(np.concatenate([p for p, _ in phases])),
+        phase_valid_N=jnp.asarray(np.concatenate([v for _, v in phases])),
     )
 
 
@@ -378,6 +460,8 @@ def make_sample_batch(cfg: DataConfig, batch_size: int):
             "pose_BxTxR": pose.astype(jnp.float32),
             "curve_BxTx3": curve.astype(jnp.float32),
             "label_B": arrays.clip_label_C[clip_B],
+            "phase_BxT": arrays.phase_N[frame_BxT],
+            "phase_valid_BxT": arrays.phase_valid_N[frame_BxT],
         }
 
     return sample_batch

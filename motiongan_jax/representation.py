@@ -175,3 +175,48 @@ def bone_lengths(pose_xR, layout: RowLayout) -> np.ndarray:
     a = np.array([p for p, _ in layout.bone_pairs])
     b = np.array([c for _, c in layout.bone_pairs])
     return np.linalg.norm(full[..., b, :] - full[..., a, :], axis=-1)
+
+
+# Skeleton semantics: which joints are the feet and the hips
+
+
+def foot_joints(layout) -> tuple[int, int]:
+    """The two contact joints: the toe joints by name (not end sites), else the lowest rest-pose
+    joint on each side of the body."""
+    names = [n.lower() for n in layout.joint_names]
+    toes = [i for i, n in enumerate(names) if "toe" in n and "end" not in n]
+    if len(toes) == 2:
+        return toes[0], toes[1]
+    if layout.rest_offsets_m is None:
+        raise ValueError(f"cannot find the feet of joints {layout.joint_names}")
+    pos = rest_positions(layout)
+    left = [i for i in range(len(pos)) if pos[i, 0] > 0]
+    right = [i for i in range(len(pos)) if pos[i, 0] < 0]
+    if not left or not right:
+        raise ValueError(f"cannot find two feet in joints {layout.joint_names}")
+    return min(left, key=lambda i: pos[i, 1]), min(right, key=lambda i: pos[i, 1])
+
+
+def joint_side(name: str) -> str | None:
+    """'left', 'right' or None from a joint's name (LeftUpLeg, LThumb, UpperLeg_L, l_knee, Foot.R)."""
+    n = name.lower()
+    if n.startswith(("left", "l_")) or n.endswith(("_l", ".l")) or (len(name) > 1 and name[0] == "L" and name[1].isupper()):
+        return "left"
+    if n.startswith(("right", "r_")) or n.endswith(("_r", ".r")) or (len(name) > 1 and name[0] == "R" and name[1].isupper()):
+        return "right"
+    return None
+
+
+def facing_joints(layout) -> tuple[int, int] | None:
+    """(left hip, right hip) for metrics.facing_error_deg: the root's children named left and
+    right (LeftUpLeg / RightUpLeg, UpperLeg_L / UpperLeg_R), else the two furthest apart along x
+    in the rest pose, left at +x (BVH's convention: a body facing +z has its left at +x). None
+    when neither finds two (facing is then not reported)."""
+    children = [k for k, p in enumerate(layout.parents) if p == 0]
+    named = {side: [k for k in children if joint_side(layout.joint_names[k]) == side] for side in ("left", "right")}
+    if len(named["left"]) == 1 and len(named["right"]) == 1:
+        return named["left"][0], named["right"][0]
+    if layout.rest_offsets_m is None or len(children) < 2:
+        return None
+    pos = rest_positions(layout)
+    return max(children, key=lambda k: pos[k, 0]), min(children, key=lambda k: pos[k, 0])

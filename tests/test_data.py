@@ -251,3 +251,29 @@ def test_bandai_two_sessions_keep_their_styles_apart(shared_data, repo):
     assert "dataset-1_walk_normal_002.bvh" not in used and "dataset-1_walk-back_normal_001.bvh" not in used
     assert 60 < sum(n.startswith("dataset-1") for n in used) <= 73
     assert all(len(c.root_Fx3) > cfg.frame_nums for c in ds.train + ds.val)
+
+
+def test_gait_statistics_recover_the_embedded_styles(repo):
+    """Measured without annotation, the embedded walks' stride lengths and gait phase agree with the
+    gait parameters each clip was generated with (its styles.json entry)."""
+    import json
+
+    from motiongan_jax import representation
+    from motiongan_jax.config import load_config
+
+    cfg = load_config(repo / "configs" / "tiny.py").data
+    ds = data.load_dataset(cfg)
+    truth = json.loads((data.resolve_data_dir(cfg) / "styles.json").read_text())["clips"]
+    gait = data.gait_targets(ds.train, ds.style_names, ds.layout)
+    assert gait.toe_joints == representation.foot_joints(ds.layout)
+    want = [np.median([truth[Path(c.source).stem]["stride_length"] for c in ds.train if c.label.style == s])
+            for s in ds.style_names]
+    np.testing.assert_allclose(gait.stride_m_C, want, rtol=0.05)
+    assert 0.02 <= gait.contact_height_m < 0.03  # planted toes sit on the floor: ~2 cm above the 10th percentile
+    for clip in ds.train[:: len(ds.train) // 6]:
+        phase, valid = data.clip_gait_phase(clip, ds.layout, gait.toe_joints)
+        chex.assert_shape((phase, valid), (len(clip.root_Fx3),))
+        assert valid.mean() > 0.95  # steady walks: the steps never fade
+        cycles_per_s = (phase[-1] - phase[0]) / (2 * np.pi) / ((len(phase) - 1) / clip.fps)
+        assert cycles_per_s == pytest.approx(truth[Path(clip.source).stem]["cadence"] / 2, rel=0.03)
+        assert np.mean(np.diff(phase) > 0) > 0.99
