@@ -44,7 +44,9 @@ def get_config() -> Config:
             val_remainder=0,
         ),
         model=ModelConfig(top=16, kw=5, w_dim=32, z_dim=32, output_prior="rest_and_curve", g_frame="curve",
-                          latent_init="torch_default", d_cond="projection", exact_bones=True),
+                          latent_init="torch_default", d_cond="projection", exact_bones=True, gait_phase=True,
+                          root_height=True),
         train=TrainConfig(batch_size=16, num_steps=10000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
+                          w_g_stride=1.0, w_g_floor=5.0, w_g_skate=5.0, w_g_rec=5.0,
                           log_every=50, preview_every=2000, checkpoint_every=1000, keep_checkpoints=10),
     )

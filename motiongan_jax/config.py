@@ -109,12 +109,13 @@ class ModelConfig:
     # whether a window is a real walk *of that style*; fakes are judged with the label G was asked
     # for). Adds one spectral-norm linear map (8·top·T/16 -> styles) to D.
     d_cond: str = "none"
-    # Gait-phase input (small configs; () is the paper's G): wavelengths in metres of walked
-    # distance. G also sees sin and cos of 2 pi s[t] / wavelength + offset for each, s[t] being
-    # the distance along the input curve and the offsets random per training sample, so a
-    # convolutional G fed a near-constant curve has something to make a gait cycle from
-    # (nn/generator.py). It did not make one at the cpu size (docs/RESULTS.md §6).
-    phase_wavelengths_m: tuple[float, ...] = ()
+    # True (small configs): G keeps a clock in walked distance, φ = φ0 + 2π s / λ(w), with a stride
+    # length λ(w) learned from the strides measured on the real training clips, and sees sin and
+    # cos of φ and 2φ at its input and every decoder level (nn/generator.py); False: the paper's G.
+    gait_phase: bool = False
+    # True (small configs): G's root head gives the root's height, not its vertical velocity, so
+    # the body cannot drift off the floor along a long curve; False: the paper's G.
+    root_height: bool = False
     # How G and D compute their convolutions: "fast" (nn/conv.py: skip and polyphase rewrites,
     # matrix-product weight gradients; the faster form on CPU) or "xla" (the straightforward
     # lax.conv form). Same parameters and checkpoints, same function up to float rounding
@@ -138,6 +139,17 @@ class TrainConfig:
     w_g_cls: float = 5.0
     w_g_curve: float = 0.1
     w_g_bone: float = 0.1
+    # Gait terms (small configs; 0 in the paper): G's stride length against the style's measured
+    # stride (model.gait_phase), the lower toe on the floor, and toes near the floor standing
+    # still (losses.foot_losses); the contact height is calibrated on the real training clips.
+    w_g_stride: float = 0.0
+    w_g_floor: float = 0.0
+    w_g_skate: float = 0.0
+    # Reconstruction (small configs; 0 in the paper): for the first half of each batch G is asked
+    # for the real window's own style (any z) at the gait phase measured on it (data.clip_gait_phase)
+    # and its pose and root sway are compared with the window's (L1, losses.reconstruction_loss),
+    # so the phase channels mean what the real feet do; the other half is the arbitrary pairing.
+    w_g_rec: float = 0.0
     w_d_adv: float = 1.0
     w_d_cls: float = 5.0
     # Number of points of the curve loss (paper: 4).
@@ -263,8 +275,8 @@ def validate(cfg: Config) -> Config:
     need(m.output_prior in OUTPUT_PRIORS, "model.output_prior", f"one of {', '.join(OUTPUT_PRIORS)}")
     need(isinstance(m.exact_bones, bool), "model.exact_bones", "true or false")
     need(m.g_frame in G_FRAMES, "model.g_frame", f"one of {', '.join(G_FRAMES)}")
-    need(all(isinstance(x, (int, float)) and x > 0 for x in m.phase_wavelengths_m), "model.phase_wavelengths_m",
-         "wavelengths must be positive numbers of metres")
+    need(isinstance(m.gait_phase, bool), "model.gait_phase", "true or false")
+    need(isinstance(m.root_height, bool), "model.root_height", "true or false")
     need(m.d_frame in D_FRAMES, "model.d_frame", f"one of {', '.join(D_FRAMES)}")
     need(m.d_cond in D_CONDS, "model.d_cond", f"one of {', '.join(D_CONDS)}")
     need(m.conv_impl in ("fast", "xla"), "model.conv_impl", "one of fast, xla")
@@ -280,6 +292,11 @@ def validate(cfg: Config) -> Config:
     need(t.log_every >= 1 and t.checkpoint_every >= 1 and t.preview_every >= 0, "train.log_every",
          "log/checkpoint intervals must be >= 1")
     need(0.0 <= t.g_ema_decay < 1.0, "train.g_ema_decay", "must be in [0, 1) (0: no average)")
+    for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec"):
+        need(getattr(t, name) >= 0, f"train.{name}", "loss weights must be >= 0")
+    need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride", "needs model.gait_phase (a stride head to train)")
+    need(t.w_g_rec == 0 or m.gait_phase, "train.w_g_rec", "needs model.gait_phase (a phase to reconstruct at)")
+    need(t.w_g_rec == 0 or t.batch_size >= 2, "train.w_g_rec", "needs train.batch_size >= 2 (half is reconstructed)")
     need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")
     return cfg
 

@@ -119,3 +119,61 @@ def bone_loss(pose_BxTxR: jax.Array, bone_pairs: Sequence[tuple[int, int]], targ
     lengths = bone_lengths(pose_BxTxR, bone_pairs)
     target = jnp.asarray(target_lengths, lengths.dtype)
     return jnp.mean(jnp.square((lengths - target) / unit))
+
+
+# Soft contact: a toe counts as on the floor by sigmoid((contact height - height) / this).
+CONTACT_SOFTNESS_M = 0.01
+
+
+def toe_tracks(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints) -> jax.Array:
+    """World toe positions B x T x K x 3 up to one constant per window: the root integrated from the
+    origin (curves.integrate) plus the toes' root-relative rows (kept-joint indices >= 1). No
+    gradient reaches the root: planting a foot is the legs' work; pushing the whole body back and
+    forth every sample would do it too, as a jitter that no other term sees."""
+    b, t, r = pose_BxTxR.shape
+    root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), jax.lax.stop_gradient(root_vel_BxTx3))
+    rows_BxTxKx3 = pose_BxTxR.reshape(b, t, r // 3, 3)[:, :, np.asarray(toe_joints) - 1]
+    return root_BxTx3[:, :, None, :] + rows_BxTxKx3
+
+
+def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, contact_height_m: float,
+                unit: float = 1.0) -> dict[str, jax.Array]:
+    """Annotation-free foot terms on G's output, in `unit`s (squared), heights measured from each
+    window's floor (its lowest toe position), so a body floating as a whole is not punished but
+    one drifting up or hopping is.
+
+    * floor: mean over samples of (height of the lower toe above the floor)²: a walk keeps a foot
+      down (real walks: millimetres above their lowest toe).
+    * skate: mean over steps and toes of c·|Δ(x, z)|², the horizontal step of each toe weighted by
+      its soft contact c = sigmoid((contact height − height) / CONTACT_SOFTNESS_M) at the step's
+      end: a toe on the floor stands still, and one that moves must lift (c has a gradient).
+    """
+    toes_BxTxKx3 = toe_tracks(root_vel_BxTx3, pose_BxTxR, toe_joints)
+    h_BxTxK = toes_BxTxKx3[..., 1]
+    h_BxTxK = h_BxTxK - jnp.min(h_BxTxK, axis=(1, 2), keepdims=True)
+    lift_BxT = jnp.min(h_BxTxK, axis=2) / unit
+    step_BxTm1xK = jnp.sum(jnp.square(jnp.diff(toes_BxTxKx3[..., ::2], axis=1)), axis=-1) / unit**2
+    contact_BxTm1xK = jax.nn.sigmoid((contact_height_m - h_BxTxK[:, 1:]) / CONTACT_SOFTNESS_M)
+    return {"floor": jnp.mean(jnp.square(lift_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
+
+
+def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax.Array:
+    """Mean squared error of G's log stride length against the log of the requested style's
+    stride measured on real clips (metres; data.style_strides)."""
+    target_B = jnp.log(jnp.asarray(stride_m_C, jnp.float32))[labels_B]
+    return jnp.mean(jnp.square(log_stride_B - target_B))
+
+
+def reconstruction_loss(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR, valid_BxT,
+                        unit: float = 1.0) -> jax.Array:
+    """Mean absolute difference (in `unit`s) of root velocity and pose rows between G's output and
+    the real windows, over the samples where `valid_BxT`; 0 when none is. Each window's mean root
+    velocity is taken out of both: the real root sways about the smoothed path the input curve
+    follows, so its mean speed along it is a few per cent higher, and the curve loss places the
+    root; what is reconstructed is the sway and bounce."""
+    fake_vel_BxTx3 = fake_vel_BxTx3 - jnp.mean(fake_vel_BxTx3, axis=1, keepdims=True)
+    real_vel_BxTx3 = real_vel_BxTx3 - jnp.mean(real_vel_BxTx3, axis=1, keepdims=True)
+    diff_BxT = (jnp.sum(jnp.abs(fake_vel_BxTx3 - real_vel_BxTx3), -1)
+                + jnp.sum(jnp.abs(fake_pose_BxTxR - real_pose_BxTxR), -1)) / (unit * (3 + real_pose_BxTxR.shape[-1]))
+    w_BxT = valid_BxT.astype(diff_BxT.dtype)
+    return jnp.sum(w_BxT * diff_BxT) / jnp.maximum(jnp.sum(w_BxT), 1.0)

@@ -93,7 +93,7 @@ def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key, impl
     return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
                      rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones,
-                     phase_wavelengths_m=m.phase_wavelengths_m, impl=impl, compute_dtype=dtype,
+                     gait_phase=m.gait_phase, root_height=m.root_height, impl=impl, compute_dtype=dtype,
                      rngs=nnx.Rngs(key))
 
 
@@ -176,6 +176,11 @@ def _zeros_z(state: TrainState, batch: int) -> jax.Array:
     return jnp.zeros((batch, generator_z_dim(state)), jnp.float32)
 
 
+def has_gait_phase(state: TrainState) -> bool:
+    """Whether the state's G keeps a gait phase (model.gait_phase): it then has a stride head."""
+    return "stride_head" in state.g_params
+
+
 def generator_z_dim(state: TrainState) -> int:
     return int(state.g_params["latent"]["embed"].shape[-1])
 
@@ -189,12 +194,12 @@ def latent_w(state: TrainState, labels_B: jax.Array, z_BxZ: jax.Array | None = N
 
 def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax.Array | None = None,
                     z_BxZ: jax.Array | None = None, *, w_BxW: jax.Array | None = None,
-                    phase_offset_BxF: jax.Array | None = None):
+                    phase_offset_B: jax.Array | None = None):
     """(root_vel_BxTx3, pose_BxTxR) from G with the state's parameters.
 
     Give either labels (and optionally z, default zeros) or a style code `w_BxW` directly. To run
-    other parameters, pass `state.replace(g_params=...)`. A G with a gait-phase input takes its
-    phase offsets (radians, B x F) from `phase_offset_BxF`, default 0.
+    other parameters, pass `state.replace(g_params=...)`. A G with a gait phase takes its phase
+    offsets (radians, B) from `phase_offset_B`, default 0.
     """
     g = generator(state)
     if w_BxW is None:
@@ -203,7 +208,7 @@ def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax
         labels_B = jnp.asarray(labels_B, jnp.int32)
         z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
         w_BxW = g.style(labels_B, z)
-    return g(curve_vel_BxTx3, w_BxW, phase_offset_BxF)
+    return g(curve_vel_BxTx3, w_BxW, phase_offset_B)
 
 
 def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:
@@ -247,22 +252,29 @@ def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, 
 
 
 def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, curve_BxTx3,
-             bone_pairs, bone_lengths_m, train_cfg, length_unit: float) -> dict[str, jax.Array]:
-    """G's loss terms (one D call). Curve and bone losses are in units of length_unit."""
+             bone_pairs, bone_lengths_m, train_cfg, length_unit: float, *, log_stride_B=None,
+             gait=None) -> dict[str, jax.Array]:
+    """G's loss terms (one D call). Curve, bone and foot losses are in units of length_unit.
+    The gait terms (train.w_g_stride, w_g_floor, w_g_skate) need `gait`, the stride term also
+    G's `log_stride_B`."""
     t = train_cfg
     adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True, labels_B=fake_labels_B)
     adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
     cls = losses.class_loss(cls_f, fake_labels_B, t.gan_loss)
     curve = losses.curve_loss(fake_vel_BxTx3, curve_BxTx3, t.curve_points, length_unit)
     bone = losses.bone_loss(fake_pose_BxTxR, bone_pairs, bone_lengths_m, length_unit)
-    return {
-        "g_adv": adv,
-        "g_cls": cls,
-        "g_curve": curve,
-        "g_bone": bone,
-        "g_total": t.w_g_adv * adv + t.w_g_cls * cls + t.w_g_curve * curve + t.w_g_bone * bone,
-        "g_cls_acc_fake": jnp.mean((jnp.argmax(cls_f, -1) == fake_labels_B).astype(jnp.float32)),
-    }
+    terms = {"g_adv": adv, "g_cls": cls, "g_curve": curve, "g_bone": bone}
+    total = t.w_g_adv * adv + t.w_g_cls * cls + t.w_g_curve * curve + t.w_g_bone * bone
+    if t.w_g_floor or t.w_g_skate:
+        feet = losses.foot_losses(fake_vel_BxTx3, fake_pose_BxTxR, gait.toe_joints, gait.contact_height_m,
+                                  length_unit)
+        terms.update(g_floor=feet["floor"], g_skate=feet["skate"])
+        total = total + t.w_g_floor * feet["floor"] + t.w_g_skate * feet["skate"]
+    if t.w_g_stride:
+        terms["g_stride"] = losses.stride_loss(log_stride_B, fake_labels_B, gait.stride_m_C)
+        total = total + t.w_g_stride * terms["g_stride"]
+    return {**terms, "g_total": total,
+            "g_cls_acc_fake": jnp.mean((jnp.argmax(cls_f, -1) == fake_labels_B).astype(jnp.float32))}
 
 
 def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Array, jax.Array]:
@@ -277,12 +289,11 @@ def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Arra
 
 
 def sample_phase(cfg, batch: int, key) -> jax.Array | None:
-    """Gait-phase offsets φ ~ U[0, 2π), B x F, for a G with model.phase_wavelengths_m; else None.
-    Drawn from fold_in(key, 1) so that the labels and z of configs without it stay as they were."""
-    num = len(cfg.model.phase_wavelengths_m)
-    if not num:
+    """Gait-phase offsets φ0 ~ U[0, 2π) (B,) for a G with model.gait_phase; else None. Drawn from
+    fold_in(key, 1) so that the labels and z of configs without it stay as they were."""
+    if not cfg.model.gait_phase:
         return None
-    return jax.random.uniform(jax.random.fold_in(key, 1), (batch, num), jnp.float32, 0.0, 2 * jnp.pi)
+    return jax.random.uniform(jax.random.fold_in(key, 1), (batch,), jnp.float32, 0.0, 2 * jnp.pi)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -293,19 +304,26 @@ def check_batch(batch: dict, num_rows: int) -> None:
     """Shapes must agree (B x T x 3, B x T x R, B); checked at trace time, costs nothing after."""
     b, t, _ = batch["curve_BxTx3"].shape
     want = {"root_BxTx3": (b, t, 3), "pose_BxTxR": (b, t, num_rows), "curve_BxTx3": (b, t, 3), "label_B": (b,)}
+    want.update({k: (b, t) for k in ("phase_BxT", "phase_valid_BxT") if k in batch})
     bad = {k: batch[k].shape for k, shape in want.items() if batch[k].shape != shape}
     if bad:
         raise ValueError(f"batch shapes disagree: {bad}; expected {want}")
 
 
-def make_train_step(cfg, layout, num_styles: int) -> Callable:
+def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     """`train_step(state, batch, key) -> (state, metrics)`, pure; jit it with donate_argnums=0.
 
     batch: root_BxTx3, pose_BxTxR, curve_BxTx3 (metres), label_B (int32); see CONTRACTS.md.
     metrics: scalar loss terms (unweighted; *_total are weighted), D accuracies, and the global L2
     norms of grads, params (after the update) and updates of each network.
+    `gait` (data.GaitTargets, from the real training clips) is needed by the gait loss terms.
     """
     tcfg = cfg.train
+    rec_half = tcfg.batch_size // 2 if tcfg.w_g_rec else 0
+    if (tcfg.w_g_stride or tcfg.w_g_floor or tcfg.w_g_skate) and gait is None:
+        raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate) need gait targets")
+    if gait is not None and len(gait.stride_m_C) != num_styles:
+        raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths for {num_styles} styles")
     if tcfg.gan_loss not in losses.GAN_LOSSES:
         raise ValueError(f"train.gan_loss must be one of {losses.GAN_LOSSES}, got {tcfg.gan_loss!r}")
     _num_joints(layout)
@@ -326,18 +344,26 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         curve_vel = curves.velocity(curve)
         real_vel = curves.velocity(batch["root_BxTx3"])
         real_pose = batch["pose_BxTxR"]
+        if rec_half:  # the first half: each window's own style and its measured phase
+            rec_B = jnp.arange(curve.shape[0]) < rec_half
+            fake_labels = jnp.where(rec_B, batch["label_B"], fake_labels)
 
         # The single G forward; its VJP carries G's loss gradient back after the D update.
         def g_forward(g_params):
             g = nnx.merge(state.g_def, g_params, copy=True)
-            return g(curve_vel, g.style(fake_labels, z), phase)
+            w = g.style(fake_labels, z)
+            phase_BxT = None
+            if rec_half:
+                phase_BxT = jnp.where(rec_B[:, None], batch["phase_BxT"], g.walked_phase(curve_vel, w, phase))
+            root_vel, pose = g(curve_vel, w, phase, phase_BxT)
+            return root_vel, pose, (g.log_stride(w) if cfg.model.gait_phase else None)
 
         fake, g_vjp = jax.vjp(g_forward, state.g_params)
 
         # --- D update on the detached fake and the real batch --------------------------------
         def d_objective(d_params):
             d = nnx.merge(state.d_def, d_params, state.d_sn_state, copy=True)
-            terms = d_losses(d, *fake, real_vel, real_pose, batch["label_B"], tcfg, fake_labels)
+            terms = d_losses(d, *fake[:2], real_vel, real_pose, batch["label_B"], tcfg, fake_labels)
             return terms["d_total"], (terms, nnx.state(d, SpectralNormState))
 
         (_, (d_terms, sn)), d_grads = jax.value_and_grad(d_objective, has_aux=True)(state.d_params)
@@ -347,8 +373,14 @@ def make_train_step(cfg, layout, num_styles: int) -> Callable:
         # --- G update through the updated D --------------------------------------------------
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
-            terms = g_losses(d, *fake_out, fake_labels, curve, bone_pairs, bone_lengths, tcfg,
-                             cfg.model.length_unit)
+            terms = g_losses(d, *fake_out[:2], fake_labels, curve, bone_pairs, bone_lengths, tcfg,
+                             cfg.model.length_unit, log_stride_B=fake_out[2], gait=gait)
+            if rec_half:
+                h = rec_half
+                terms["g_rec"] = losses.reconstruction_loss(fake_out[0][:h], fake_out[1][:h], real_vel[:h],
+                                                            real_pose[:h], batch["phase_valid_BxT"][:h],
+                                                            cfg.model.length_unit)
+                terms["g_total"] = terms["g_total"] + tcfg.w_g_rec * terms["g_rec"]
             return terms["g_total"], (terms, nnx.state(d, SpectralNormState))
 
         (_, (g_terms, sn)), fake_grads = jax.value_and_grad(g_objective, has_aux=True)(fake)

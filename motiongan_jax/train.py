@@ -113,7 +113,7 @@ def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray,
     labels = np.linspace(0, len(style_names) - 1, min(num, len(style_names))).round().astype(np.int32)
     gen = generate.generate_motion(state, layout, curve_Tx3, step_lib.latent_w(state, jnp.asarray(labels)))
     return viz.animate_motions(list(gen.positions), layout.parents, [style_names[i] for i in labels], path,
-                               curves=[curve_Tx3] * len(labels))
+                               curves=[curve_Tx3] * len(labels), joint_names=layout.joint_names)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -132,7 +132,13 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
     k_init, k_data, k_step = keys(cfg.train.seed)
     state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
-    step_fn = step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles)
+    gait = None
+    t = cfg.train
+    if t.w_g_stride or t.w_g_floor or t.w_g_skate:
+        gait = data.gait_targets(dataset.train, dataset.style_names, dataset.layout)
+        log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
+            + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))
+    step_fn = step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
     sample_fn = data.make_sample_batch(cfg.data, cfg.train.batch_size)
     if jax.device_count() > 1:  # data parallel: batch split over devices, state replicated
         mesh = parallel.data_mesh()

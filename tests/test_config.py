@@ -37,7 +37,7 @@ def test_override_types_and_errors():
                           "data.fps_factors=(1.0,)", "name=x"])
     assert cfg2.train.batch_size == 8 and cfg2.train.lr_g == 0.001 and cfg2.data.rotate is False
     assert cfg2.data.fps_factors == (1.0,) and cfg2.name == "x"
-    assert override(cfg, ["model.phase_wavelengths_m=1.2"]).model.phase_wavelengths_m == (1.2,)
+    assert override(cfg, ["data.fps_factors=1.5"]).data.fps_factors == (1.5,)
     # "none" is a value of string options, and None only for fields that may be None
     assert override(cfg, ["model.d_cond=none"]).model.d_cond == "none"
     assert override(cfg, ["model.output_prior=none"]).model.output_prior == "none"
@@ -61,8 +61,10 @@ def test_override_types_and_errors():
     ("model.conv_impl=cudnn", "model.conv_impl"),
     ("model.compute_dtype=float16", "model.compute_dtype"),
     ("model.d_cond=concat", "model.d_cond"),
-    ("model.phase_wavelengths_m=(1.0,0)", "model.phase_wavelengths_m"),
-    ("model.phase_wavelengths_m=('long',)", "model.phase_wavelengths_m"),
+    ("model.gait_phase=1", "model.gait_phase"),
+    ("train.w_g_skate=-1.0", "train.w_g_skate"),
+    ("train.w_g_stride=1.0", "train.w_g_stride"),  # needs model.gait_phase
+    ("train.w_g_rec=1.0", "train.w_g_rec"),  # likewise
     ("train.g_ema_decay=1.0", "train.g_ema_decay"),
     ("train.g_ema_decay=-0.1", "train.g_ema_decay"),
 ])

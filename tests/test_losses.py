@@ -100,3 +100,86 @@ def test_bone_loss_gradient_finite_at_zero_length():
     pose = jnp.zeros((1, 2, 6))
     g = jax.grad(lambda p: losses.bone_loss(p, [(0, 1), (1, 2)], [0.1, 0.2]))(pose)
     assert bool(jnp.all(jnp.isfinite(g)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Gait terms
+
+def _toes_as_output(toes_BxTx2x3):
+    """G-style outputs (root velocity, rows) whose world toes (joints 1 and 2) are `toes`: the root
+    stays at the origin, so the rows are the toes themselves."""
+    b, t = toes_BxTx2x3.shape[:2]
+    return jnp.zeros((b, t, 3)), jnp.asarray(toes_BxTx2x3.reshape(b, t, 6), jnp.float32)
+
+
+def test_foot_losses_by_hand():
+    T, unit, contact = 12, 0.05, 0.02
+    # a planted left toe and a right toe 0.3 m up swinging 0.1 m per sample: the lower toe is on
+    # the floor (no floor term), the planted toe does not move, the swinging one is far above the
+    # contact height (its weight sigmoid(-0.28 / 0.01) ~ 7e-13): both terms ~0
+    toes = np.zeros((1, T, 2, 3))
+    toes[0, :, 1, 1] = 0.3
+    toes[0, :, 1, 2] = 0.1 * np.arange(T)
+    out = losses.foot_losses(*_toes_as_output(toes), (1, 2), contact, unit)
+    assert float(out["floor"]) == 0.0 and float(out["skate"]) < 1e-9
+    # a glider, both toes on the floor sliding 0.04 m per sample: contact weight sigmoid(2) at
+    # height 0, so skate = sigmoid(2) (0.04 / 0.05)² for every step and toe; floor still 0
+    glide = np.zeros((1, T, 2, 3))
+    glide[0, :, :, 2] = 0.04 * np.arange(T)[:, None]
+    out = losses.foot_losses(*_toes_as_output(glide), (1, 2), contact, unit)
+    assert float(out["floor"]) == 0.0
+    assert float(out["skate"]) == pytest.approx(1 / (1 + math.exp(-2)) * 0.64, rel=1e-5)
+    # a hopper, both toes 0 m for the first half, 0.1 m for the second (heights are measured from
+    # the window's own lowest toe, so a whole-body offset changes nothing): the lower toe is
+    # 0.1 m up in half the samples
+    hop = np.zeros((2, T, 2, 3))
+    hop[:, T // 2:, :, 1] = 0.1
+    hop[1, ..., 1] += 0.7
+    out = losses.foot_losses(*_toes_as_output(hop), (1, 2), contact, unit)
+    assert float(out["floor"]) == pytest.approx(0.5 * (0.1 / unit) ** 2, rel=1e-5)
+    # with the root carrying the glide instead of the rows, the same skate (world toes are root +
+    # rows, the root integrated from the origin)
+    vel = jnp.zeros((1, T, 3)).at[:, :, 2].set(0.04)
+    rows = jnp.zeros((1, T, 6))
+    assert float(losses.foot_losses(vel, rows, (1, 2), contact, unit)["skate"]) == pytest.approx(
+        1 / (1 + math.exp(-2)) * 0.64, rel=1e-5)
+    # but only the legs are asked to plant the feet: no gradient reaches the root
+    g_vel, g_rows = jax.grad(lambda v, r: sum(losses.foot_losses(v, r, (1, 2), contact, unit).values()),
+                             argnums=(0, 1))(vel, rows)
+    assert float(jnp.abs(g_vel).max()) == 0.0 and float(jnp.abs(g_rows).max()) > 0.0
+
+
+def test_skate_term_pays_for_lifting_a_moving_toe():
+    # the soft contact has a gradient: raising a sliding toe lowers the term, and so does slowing it
+    T = 8
+    glide = np.zeros((1, T, 2, 3))
+    glide[0, :, :, 2] = 0.04 * np.arange(T)[:, None]
+    glide[0, :, 0, 1] = 0.01  # the left toe slightly up: the right one is the floor
+    vel, rows = _toes_as_output(glide)
+    g = jax.grad(lambda r: losses.foot_losses(vel, r, (1, 2), 0.02, 0.05)["skate"])(rows)
+    g = np.asarray(g).reshape(1, T, 2, 3)
+    assert np.all(g[0, 1:, 0, 1] < 0)  # up lowers it
+    assert np.all(g[0, 1:-1, :, 2] == pytest.approx(0.0, abs=1e-6))  # a steady slide: inner steps cancel
+
+
+def test_stride_loss_by_hand():
+    log_stride = jnp.log(jnp.array([1.0, 0.5, 2.0]))
+    got = float(losses.stride_loss(log_stride, jnp.array([0, 1, 1]), (1.0, 1.0)))
+    assert got == pytest.approx((0.0 + math.log(2) ** 2 + math.log(2) ** 2) / 3, rel=1e-6)
+
+
+def test_reconstruction_loss_by_hand_and_mask():
+    B, T, R = 2, 4, 6
+    vel, pose = jnp.zeros((B, T, 3)), jnp.zeros((B, T, R))
+    real_pose = pose.at[0, 1, 2].set(0.9)  # one row off by 0.9 m in one sample
+    valid = jnp.ones((B, T), bool)
+    got = float(losses.reconstruction_loss(vel, pose, vel, real_pose, valid, unit=0.3))
+    assert got == pytest.approx(0.9 / 0.3 / (3 + R) / (B * T), rel=1e-6)
+    # samples without a measured phase do not count
+    assert float(losses.reconstruction_loss(vel, pose, vel, real_pose, valid.at[0, 1].set(False), 0.3)) == 0.0
+    assert float(losses.reconstruction_loss(vel, pose, vel, real_pose, jnp.zeros((B, T), bool), 0.3)) == 0.0
+    # a constant root velocity offset is the curve loss's business; a fluctuation is reconstructed
+    assert float(losses.reconstruction_loss(vel + 0.2, pose, vel, pose, valid, 0.3)) == pytest.approx(0.0, abs=1e-7)
+    bounce = vel.at[:, ::2, 1].set(0.03).at[:, 1::2, 1].set(-0.03)
+    assert float(losses.reconstruction_loss(bounce, pose, vel, pose, valid, 0.3)) == pytest.approx(0.03 / 0.3 / (3 + R),
+                                                                                                    rel=1e-5)

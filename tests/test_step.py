@@ -396,79 +396,131 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
 
 
 def test_gait_phase_by_hand():
-    """a_k[t] = 2π s[t] / λ_k + φ_k with s[t] the horizontal distance walked to sample t; the
-    vertical component does not count, and a turning path counts its arc length."""
-    from motiongan_jax.nn.generator import gait_phase
+    """φ[t] = φ0 + 2π s[t] / λ with s[t] the horizontal distance walked to sample t (v[0] is not
+    walked, as in curves.integrate); the vertical component does not count, and a turning path
+    counts its arc length. Channels: sin φ, sin 2φ, cos φ, cos 2φ."""
+    from motiongan_jax.nn.generator import gait_phase, walked_phase
 
-    vel = jnp.tile(jnp.array([0.1, 5.0, 0.0]), (1, 8, 1))  # 0.1 m per sample along x; y ignored
-    out = gait_phase(vel, (0.4, 0.8), jnp.array([[0.3, -1.0]]))
-    chex.assert_shape(out, (1, 8, 4))
-    t = np.arange(1, 9)
-    a1, a2 = np.pi / 2 * t + 0.3, np.pi / 4 * t - 1.0  # 0.1 t / 0.4 and 0.1 t / 0.8 turns
-    np.testing.assert_allclose(np.asarray(out[0]), np.stack([np.sin(a1), np.sin(a2), np.cos(a1), np.cos(a2)], -1),
-                               atol=1e-5)
+    vel = jnp.tile(jnp.array([0.1, 5.0, 0.0]), (2, 8, 1))  # 0.1 m per sample along x; y ignored
+    out = gait_phase(walked_phase(vel, jnp.array([0.4, 0.8]), jnp.array([0.3, -1.0])))
+    chex.assert_shape(out, (2, 8, 4))
+    s = 0.1 * np.arange(8)
+    for b, (lam, phi0) in enumerate(((0.4, 0.3), (0.8, -1.0))):
+        a = phi0 + 2 * np.pi * s / lam
+        np.testing.assert_allclose(np.asarray(out[b]), np.stack([np.sin(a), np.sin(2 * a), np.cos(a), np.cos(2 * a)], -1),
+                                   atol=1e-5)
     # a quarter circle of radius 2 m in 16 steps: each step is a chord 2·2·sin(π/64) long
     ang = np.linspace(0, np.pi / 2, 17)
     pts = 2.0 * np.stack([np.sin(ang), 0 * ang, 1 - np.cos(ang)], -1)
-    v = jnp.asarray(np.diff(pts, axis=0)[None], jnp.float32)
-    s = 4.0 * np.sin(np.pi / 64) * np.arange(1, 17)
-    np.testing.assert_allclose(np.asarray(gait_phase(v, (1.0,), jnp.zeros((1, 1))))[0, :, 0],
-                               np.sin(2 * np.pi * s), atol=1e-5)
+    v = jnp.asarray(np.concatenate([np.diff(pts, axis=0)[:1], np.diff(pts, axis=0)])[None], jnp.float32)
+    s = 4.0 * np.sin(np.pi / 64) * np.arange(17)
+    np.testing.assert_allclose(np.asarray(walked_phase(v, jnp.ones(1), jnp.zeros(1)))[0], 2 * np.pi * s, atol=1e-5)
 
 
-def test_phase_input_grows_only_ec0_0_and_is_used():
-    """model.phase_wavelengths_m: ec0_0 takes 1 + 2F channels and every other parameter is as
-    before; the phase offset changes the motion, None means 0, and a G without the input refuses
-    offsets; G stays exactly rotation-equivariant in the curve frame."""
+def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
+    """model.gait_phase: the phase channels widen ec0_0, the e2 and e1 skips (dc2_1, dc1_1) and
+    dc1_0, and a stride head is added, every other parameter is as before; the offset moves the
+    motion, None means 0, a G without the phase refuses offsets; the stride is exp of the head
+    (1 m at init); G stays exactly rotation-equivariant in the curve frame."""
     from motiongan_jax import curves
+    from motiongan_jax.nn.generator import PHASE_CHANNELS
 
     base = ModelConfig(top=4, w_dim=8, z_dim=8, output_prior="rest_and_curve", g_frame="curve")
-    lams = (0.8, 1.0, 1.3)
     plain = step_lib._build_g(base, J, C, None, jax.random.key(3))
-    g = step_lib._build_g(dataclasses.replace(base, phase_wavelengths_m=lams), J, C, None, jax.random.key(3))
-    p_plain = nnx.to_flat_state(nnx.state(plain, nnx.Param))
-    p_phase = nnx.to_flat_state(nnx.state(g, nnx.Param))
-    differ = [k for (k, a), (_, b) in zip(p_plain, p_phase) if a[...].shape != b[...].shape]
-    assert differ == [("ec0_0", "conv", "kernel")]
-    kernel = dict(p_phase)[("ec0_0", "conv", "kernel")][...]
-    chex.assert_shape(kernel, (base.kw, 1, 1 + 2 * len(lams), base.top))
+    g = step_lib._build_g(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
+    p_plain = dict(nnx.to_flat_state(nnx.state(plain, nnx.Param)))
+    p_phase = dict(nnx.to_flat_state(nnx.state(g, nnx.Param)))
+    assert set(p_phase) - set(p_plain) == {("stride_head", "kernel"), ("stride_head", "bias")}
+    differ = sorted(k for k in p_plain if p_plain[k][...].shape != p_phase[k][...].shape)
+    assert differ == [("dc1_0", "conv", "kernel"), ("dc1_1", "conv", "kernel"), ("dc2_1", "conv", "kernel"),
+                      ("ec0_0", "conv", "kernel")]
+    for k in differ:  # the input axis grows by the phase channels, nothing else
+        a, b = p_plain[k][...].shape, p_phase[k][...].shape
+        assert b[:2] == a[:2] and b[3] == a[3] and b[2] == a[2] + PHASE_CHANNELS, (k, a, b)
     vel = jnp.tile(jnp.array([0.02, 0.0, 0.08]), (B, T, 1))
     w = g.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
+    np.testing.assert_array_equal(np.asarray(g.log_stride(w)), np.zeros(B))
     v0, p0 = g(vel, w)
-    vz, pz = g(vel, w, jnp.zeros((B, 3)))
-    assert _leaves_equal((v0, p0), (vz, pz))
-    _, p1 = g(vel, w, jnp.full((B, 3), 2.0))
+    assert _leaves_equal((v0, p0), g(vel, w, jnp.zeros(B)))
+    _, p1 = g(vel, w, jnp.full((B,), 2.0))
     assert float(jnp.abs(p1 - p0).max()) > 1e-3
-    offset = jnp.array([[0.1, 0.2, 0.3], [1.0, 2.0, 3.0]])
+    offset = jnp.array([0.1, 3.0])
     v1, p1 = g(vel, w, offset)
     v2, p2 = g(curves.rotate_y(vel, 1.1), w, offset)
     np.testing.assert_allclose(np.asarray(v2), np.asarray(curves.rotate_y(v1, 1.1)), atol=2e-5)
     np.testing.assert_allclose(np.asarray(p2), np.asarray(curves.rotate_y(p1.reshape(B, T, -1, 3), 1.1).reshape(p1.shape)),
                                atol=2e-5)
-    with pytest.raises(ValueError, match="no gait-phase input"):
+    with pytest.raises(ValueError, match="no gait phase"):
         plain(vel, w, offset)
-    with pytest.raises(ValueError, match="phase_wavelengths_m"):
-        validate(Config(model=dataclasses.replace(base, phase_wavelengths_m=(1.0, -0.5))))
+    with pytest.raises(ValueError, match="no gait phase"):
+        plain.log_stride(w)
 
 
-def test_train_step_draws_phase_offsets_and_trains_the_phase_weights():
-    cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4, g_frame="curve",
-                                                                      phase_wavelengths_m=(0.9, 1.4))))
+def test_root_height_head_gives_the_velocity_as_a_difference():
+    """model.root_height: G's vertical velocity is the difference of its root head's y channel
+    (v[0] = v[1], the velocity convention), so integrating it gives that height back up to a
+    constant; x and z are the velocity head's, as without the option."""
+    base = ModelConfig(top=4, w_dim=8, z_dim=8)
+    g_vel = step_lib._build_g(base, J, C, None, jax.random.key(3))
+    g_h = step_lib._build_g(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
+    vel = 0.1 * jax.random.normal(jax.random.key(1), (B, T, 3))
+    w = g_vel.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
+    head, pose = g_vel(vel, w)  # the same parameters: this y is the height head's output
+    v, pose_h = g_h(vel, w)
+    np.testing.assert_array_equal(np.asarray(pose), np.asarray(pose_h))
+    np.testing.assert_array_equal(np.asarray(v[..., ::2]), np.asarray(head[..., ::2]))
+    h = np.asarray(head[..., 1])
+    np.testing.assert_allclose(np.asarray(v[:, 1:, 1]), np.diff(h, axis=1), atol=1e-7)
+    np.testing.assert_array_equal(np.asarray(v[:, 0, 1]), np.asarray(v[:, 1, 1]))
+
+
+def _gait_cfg():
+    from motiongan_jax.data import GaitTargets
+
+    cfg = validate(dataclasses.replace(
+        CFG, model=dataclasses.replace(CFG.model, top=4, g_frame="curve", gait_phase=True, root_height=True,
+                                       latent_init="torch_default"),
+        train=dataclasses.replace(CFG.train, w_g_stride=1.0, w_g_floor=1.0, w_g_skate=1.0)))
+    return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), contact_height_m=0.02, toe_joints=(4, 9))
+
+
+def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head():
+    cfg, gait = _gait_cfg()
     assert step_lib.sample_phase(CFG, B, jax.random.key(0)) is None
     ph = step_lib.sample_phase(cfg, 1000, jax.random.key(0))
-    chex.assert_shape(ph, (1000, 2))
+    chex.assert_shape(ph, (1000,))
     assert float(ph.min()) >= 0.0 and float(ph.max()) < 2 * np.pi and abs(float(ph.mean()) - np.pi) < 0.2
     # the offsets come from their own stream: labels and z are those of a config without them
     assert _leaves_equal(step_lib.sample_labels_and_z(cfg, C, B, jax.random.key(5)),
                          step_lib.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
+    with pytest.raises(ValueError, match="need gait targets"):
+        step_lib.make_train_step(cfg, LAYOUT, C)
+    with pytest.raises(ValueError, match="3 stride lengths for 4 styles"):
+        step_lib.make_train_step(cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
     state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state0, _batch(), jax.random.key(1)).compile(
+    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, _batch(), jax.random.key(1)).compile(
         compiler_options=FAST)
-    state1, m = step(state0, _batch(), jax.random.key(1))
+    state, m = step(state0, _batch(), jax.random.key(1))
     chex.assert_tree_all_finite(m)
+    assert {"g_stride", "g_floor", "g_skate"} <= set(m) and float(m["g_stride"]) > 0  # values: tests/test_losses.py
     k0 = state0.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
-    k1 = state1.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
-    assert float(jnp.abs(k1 - k0).min()) > 0  # every phase weight got a gradient
+    assert float(jnp.abs(state.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :] - k0).min()) > 0  # phase weights train
+    # only the stride term reaches the stride head (G's phase sees a stop-gradient stride), so its
+    # gradient is that of mean((log λ - log target)²) by hand, and Adam's first step is -lr·sign(g)
+    from motiongan_jax.nn.generator import STRIDE_GAIN
+
+    labels, z = step_lib.sample_labels_and_z(cfg, C, B, jax.random.key(1))
+    g0 = step_lib.generator(state0)
+    w = np.asarray(g0.style(labels, z))
+    err = np.asarray(g0.log_stride(jnp.asarray(w))) - np.log(np.asarray(gait.stride_m_C))[np.asarray(labels)]
+    assert float(m["g_stride"]) == pytest.approx(np.mean(err**2), rel=1e-5)
+    grad_kernel, grad_bias = 2 * STRIDE_GAIN * (err[:, None] * w).mean(0), 2 * STRIDE_GAIN * err.mean()
+    lr = cfg.train.lr_g
+    np.testing.assert_allclose(np.asarray(state.g_params["stride_head"]["kernel"][...])[:, 0],
+                               -lr * np.sign(grad_kernel), rtol=1e-4)
+    assert float(state.g_params["stride_head"]["bias"][...][0]) == pytest.approx(-lr * np.sign(grad_bias), rel=1e-4)
+    with pytest.raises(ValueError, match="gait_phase"):
+        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, gait_phase=False)))
 
 
 def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged():

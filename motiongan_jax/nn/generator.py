@@ -50,17 +50,23 @@ root, p[b] = p[a] + L_ab (r[b] - r[a]) / |r[b] - r[a]| for raw rows r. A pose wh
 have the right lengths is unchanged; bone lengths cannot drift, so neither D's class head nor
 its real/fake head can be answered with a stretched body.
 
-Gait phase (model.phase_wavelengths_m, small configs; empty in the paper's G): G's input, a
-curve resampled at equal arc length, is nearly constant (in the curve frame exactly so on a
-straight path), and G is convolutional, so apart from the window's edges and the 8-sample period
-of its strides it has nothing to hang a gait cycle on; the cpu config's bodies glide
-(docs/RESULTS.md §5). With F wavelengths λ_k, ec0_0
-takes 1 + 2F channels: the velocity plus sin and cos of 2π s[t] / λ_k + φ_k, tiled over the 3
-width rows, where s[t] is the distance walked along the curve (`gait_phase`). The offsets φ_k
-are drawn uniformly per training sample (`step.sample_phase`) so that no phase is favoured, and
-are 0 unless given at generation. The channels depend on distance, not on time, so they stay
-right under the FPS augmentation and rotate with nothing. Only ec0_0's kernel grows. Measured
-on the cpu config: no gait after 10,000 steps either (docs/RESULTS.md §6), so it stays off.
+Gait phase (model.gait_phase, small configs; off in the paper's G): G's input, a curve resampled
+at equal arc length, is nearly constant on straight stretches and G is convolutional, so it has
+nothing to hang a gait cycle on and makes a phase-averaged body gliding forward. With the option
+G keeps a clock in walked distance: φ[t] = φ0 + 2π s[t] / λ(w), s[t] the distance walked along
+the curve, λ(w) = exp(stride_head(w)) metres the stride length of the style (one left and one
+right step), φ0 a phase offset (random per training sample, `step.sample_phase`; 0 unless given
+at generation). sin and cos of φ and 2φ (`gait_phase`) enter ec0_0 beside the velocity, join the
+skips e1 and e2 at their rates and the input of dc1_0 at full rate, so every decoder level can
+place the feet by phase. The clock depends on distance, not time, so it stays right under the
+FPS augmentation (a faster playback walks the same strides in fewer samples) and rotates with
+nothing. The stride head is trained to each style's stride length measured on the real training
+clips (`losses.stride_loss`), so cadence follows the style and the curve's speed.
+
+Root height (model.root_height, small configs; off in the paper's G): the root head's y channel is
+the root's height (up to a constant) instead of its vertical velocity, and the y velocity G
+returns is its difference. An integrated velocity lets a small bias drift the body off the floor
+over a long curve; a height cannot drift.
 
 Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
@@ -85,7 +91,7 @@ from flax import nnx
 
 from motiongan_jax import curves
 from motiongan_jax.nn.latent import LatentTransform
-from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, leaky_relu, upsample_time2
+from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, Dense, leaky_relu, upsample_time2, zeros_init
 
 MAX_JOINTS = 27
 FRAMES = ("world", "curve")
@@ -104,14 +110,28 @@ def project_bones(pose_BxTxR: jax.Array, bones) -> jax.Array:
     return jnp.stack(out[1:], axis=2).reshape(b, t, r)
 
 
-def gait_phase(curve_vel_BxTx3: jax.Array, wavelengths_m, offset_BxF: jax.Array) -> jax.Array:
-    """B x T x 2F: [sin(a_1..a_F), cos(a_1..a_F)], a_k[t] = 2π s[t] / λ_k + φ_k, where s[t] is the
-    horizontal distance walked up to sample t (the sum of |v[0..t]|, metres)."""
-    lam_F = jnp.asarray(wavelengths_m, jnp.float32)
-    chex.assert_shape(offset_BxF, (curve_vel_BxTx3.shape[0], lam_F.shape[0]))
-    dist_BxT = jnp.cumsum(jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1), axis=1)
-    angle_BxTxF = 2 * jnp.pi * dist_BxT[..., None] / lam_F + offset_BxF[:, None, :]
-    return jnp.concatenate([jnp.sin(angle_BxTxF), jnp.cos(angle_BxTxF)], -1)
+PHASE_HARMONICS = 2  # φ and 2φ: a foot's cycle and the body's bounce, twice per stride
+# Adam moves a parameter by about the learning rate per step, whatever its gradient; this gain on
+# the stride head's output lets the stride reach its targets in hundreds of steps, not thousands.
+STRIDE_GAIN = 10.0
+PHASE_CHANNELS = 2 * PHASE_HARMONICS
+
+
+def walked_phase(curve_vel_BxTx3: jax.Array, stride_B: jax.Array, offset_B: jax.Array) -> jax.Array:
+    """B x T gait phase (radians) φ[t] = φ0 + 2π s[t] / λ, where s[t] is the horizontal distance
+    walked up to sample t (the sum of |v[1..t]|, metres; v[0] duplicates v[1] and is not walked, as
+    in curves.integrate), λ = `stride_B` metres and φ0 = `offset_B` radians."""
+    b = curve_vel_BxTx3.shape[0]
+    chex.assert_shape((stride_B, offset_B), (b,))
+    step_BxT = jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1).at[:, 0].set(0.0)
+    return offset_B[:, None] + 2 * jnp.pi * jnp.cumsum(step_BxT, axis=1) / stride_B[:, None]
+
+
+def gait_phase(phase_BxT: jax.Array) -> jax.Array:
+    """B x T x 4 channels of a phase: [sin φ, sin 2φ, cos φ, cos 2φ]."""
+    k_H = jnp.arange(1, PHASE_HARMONICS + 1, dtype=jnp.float32)
+    a_BxTxH = phase_BxT[..., None] * k_H
+    return jnp.concatenate([jnp.sin(a_BxTxH), jnp.cos(a_BxTxH)], -1)
 
 
 class StyledBlock(nnx.Module):
@@ -153,7 +173,8 @@ class Generator(nnx.Module):
         residual_root: bool = False,
         frame: str = "world",
         bones: tuple[tuple[int, int, float], ...] | None = None,
-        phase_wavelengths_m: tuple[float, ...] = (),
+        gait_phase: bool = False,
+        root_height: bool = False,
         impl: str = "fast",
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
@@ -185,9 +206,8 @@ class Generator(nnx.Module):
                 raise ValueError("bones must be (parent, child, length) with each joint 1..J a child once, "
                                  "parents before children")
         self.bones = bones  # static: part of the graph definition
-        if any(not lam > 0 for lam in phase_wavelengths_m):
-            raise ValueError(f"phase wavelengths must be positive, got {phase_wavelengths_m}")
-        self.phase_wavelengths_m = tuple(float(lam) for lam in phase_wavelengths_m)  # static
+        self.gait_phase = bool(gait_phase)  # static
+        self.root_height = bool(root_height)
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
@@ -198,7 +218,8 @@ class Generator(nnx.Module):
             return StyledBlock(ConvTranspose(cin, cout, (kw, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
 
         t1, t2, t4, t8 = top, 2 * top, 4 * top, 8 * top
-        self.ec0_0 = conv(1 + 2 * len(self.phase_wavelengths_m), t1)
+        ph = PHASE_CHANNELS if self.gait_phase else 0
+        self.ec0_0 = conv(1 + ph, t1)
         self.ec1_0 = conv(t1, t2, 3, (2, 3))
         self.ec1_1 = conv(t2, t2)
         self.ec2_0 = conv(t2, t4, 1, (2, 1))
@@ -208,25 +229,46 @@ class Generator(nnx.Module):
         self.dc_bottom = tconv(t8, t8)
         self.dc3_1 = tconv(t8, t8)
         self.dc3_0 = conv(t8, t4, 3, pad_w=1)
-        self.dc2_1 = tconv(t4 + t4, t4)
+        self.dc2_1 = tconv(t4 + ph + t4, t4)
         self.dc2_0 = conv(t4, t2, 3, pad_w=1)
-        self.dc1_1 = tconv(t2 + t2, t2)
-        self.dc1_0 = conv(t2, t1, 3, pad_w=1)
+        self.dc1_1 = tconv(t2 + ph + t2, t2)
+        self.dc1_0 = conv(t2 + ph, t1, 3, pad_w=1)
         self.c_traj = Conv(t1, 3, (kw, self.num_rows), impl=impl, rngs=rngs)
         self.dc0_0 = Conv(t1, 1, (kw, 1), impl=impl, rngs=rngs)
+        # log stride length (metres) of the style; zero init: 1 m strides until trained
+        self.stride_head = (Dense(w_dim, 1, kernel_init=zeros_init, bias_init=zeros_init, rngs=rngs)
+                            if self.gait_phase else None)
 
     def style(self, labels_B: jax.Array, z_BxZ: jax.Array) -> jax.Array:
         """The style code w (B x w_dim) of the Latent Transform."""
         return self.latent(labels_B, z_BxZ)
 
+    def log_stride(self, w_BxW: jax.Array) -> jax.Array:
+        """log of the stride length λ(w) in metres (B), for a G with a gait phase."""
+        if self.stride_head is None:
+            raise ValueError("this G has no gait phase (model.gait_phase)")
+        return STRIDE_GAIN * self.stride_head(w_BxW)[:, 0]
+
     def adain_styles(self, w_BxW: jax.Array) -> dict[str, tuple[jax.Array, jax.Array]]:
         """(scale, bias) of every AdaIN layer for a style code, keyed by block name."""
         return {name: getattr(self, name).adain.style(w_BxW) for name in self.BLOCKS}
 
-    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array,
-                 phase_offset_BxF: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
-        """(root_vel_BxTx3, pose_BxTxR); `phase_offset_BxF` (radians, default 0) only with a
-        gait-phase input, one per wavelength."""
+    def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array,
+                     phase_offset_B: jax.Array | None = None) -> jax.Array:
+        """B x T: the phase this G walks a curve with (`walked_phase` at its stride λ(w), offset
+        default 0)."""
+        b = curve_vel_BxTx3.shape[0]
+        offset_B = jnp.zeros((b,), jnp.float32) if phase_offset_B is None else phase_offset_B
+        # the stride is learned from measured strides alone (losses.stride_loss): the GAN's
+        # gradient through sin(2π s / λ) is periodic in 1/λ and would only add noise
+        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxW)))
+        return walked_phase(curve_vel_BxTx3, stride_B, offset_B)
+
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array, phase_offset_B: jax.Array | None = None,
+                 phase_BxT: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        """(root_vel_BxTx3, pose_BxTxR). A G with a gait phase walks with `self.walked_phase`
+        (`phase_offset_B` radians, default 0), or with the given `phase_BxT` (radians: a real
+        window's measured phase, for reconstruction)."""
         t = curve_vel_BxTx3.shape[1]
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
@@ -250,13 +292,23 @@ class Generator(nnx.Module):
             theta_BxT = curves.heading(curve_vel_BxTx3)
             vel_in = curves.rotate_y(curve_vel_BxTx3, -jnp.concatenate([theta_BxT[:, :1], theta_BxT[:, :-1]], 1))
         x = (vel_in / self.length_unit)[..., None]  # B x T x 3 x 1
-        if self.phase_wavelengths_m:
-            b, f = curve_vel_BxTx3.shape[0], len(self.phase_wavelengths_m)
-            offset = jnp.zeros((b, f), jnp.float32) if phase_offset_BxF is None else phase_offset_BxF
-            phase_BxTx2F = gait_phase(curve_vel_BxTx3, self.phase_wavelengths_m, offset)
-            x = jnp.concatenate([x, jnp.broadcast_to(phase_BxTx2F[:, :, None, :], (b, t, 3, 2 * f))], -1)
-        elif phase_offset_BxF is not None:
-            raise ValueError("phase_offset_BxF given, but this G has no gait-phase input")
+        b = curve_vel_BxTx3.shape[0]
+        phase_BxTx1xP = None
+        if self.gait_phase:
+            if phase_BxT is None:
+                phase_BxT = self.walked_phase(curve_vel_BxTx3, w_BxW, phase_offset_B)
+            phase_BxTx1xP = gait_phase(phase_BxT)[:, :, None, :].astype(self.compute_dtype)
+            x = jnp.concatenate([x, jnp.broadcast_to(phase_BxTx1xP, (b, t, 3, PHASE_CHANNELS))], -1)
+        elif phase_offset_B is not None or phase_BxT is not None:
+            raise ValueError("a phase given, but this G has no gait phase (model.gait_phase)")
+
+        def with_phase(e_BxTxWxC, rate):
+            """e with the phase channels of every `rate`-th sample appended (its time grid)."""
+            if phase_BxTx1xP is None:
+                return e_BxTxWxC
+            p = jnp.broadcast_to(phase_BxTx1xP[:, ::rate], e_BxTxWxC.shape[:3] + (PHASE_CHANNELS,))
+            return jnp.concatenate([e_BxTxWxC, p], -1)
+
         x = x.astype(self.compute_dtype)
         x = block("ec0_0", x)
         x = block("ec1_0", x)
@@ -268,13 +320,17 @@ class Generator(nnx.Module):
 
         x = up_block("dc3_1", block("dc_bottom", x))
         d2 = block("dc3_0", x)
-        x = up_block("dc2_1", d2, e2)
+        x = up_block("dc2_1", d2, with_phase(e2, 4))
         d1 = block("dc2_0", x)[:, :, : self.num_joints]
-        x = up_block("dc1_1", d1, e1)
-        d0 = block("dc1_0", x)
+        x = up_block("dc1_1", d1, with_phase(e1, 2))
+        d0 = block("dc1_0", with_phase(x, 1))
 
         with jax.named_scope("heads"):
             root_vel_BxTx3 = self.c_traj(d0)[:, :, 0, :].astype(jnp.float32) * self.length_unit
+            if self.root_height:  # y is a height: its difference is the velocity (v[0] = v[1])
+                h_BxT = root_vel_BxTx3[..., 1]
+                dh_BxT = h_BxT[:, 1:] - h_BxT[:, :-1]
+                root_vel_BxTx3 = root_vel_BxTx3.at[..., 1].set(jnp.concatenate([dh_BxT[:, :1], dh_BxT], 1))
             pose_BxTxR = self.dc0_0(d0)[..., 0].astype(jnp.float32) * self.length_unit
         if self.rest_pose_R is not None:
             pose_BxTxR = pose_BxTxR + jnp.asarray(self.rest_pose_R, pose_BxTxR.dtype)
