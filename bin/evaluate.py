@@ -40,9 +40,10 @@ def main(argv=None) -> int:
     import dataclasses
     import hashlib
 
+    import jax
     import numpy as np
 
-    from motiongan_jax import checkpoint, curves, data, evaluation, evaluator, generate
+    from motiongan_jax import checkpoint, curves, data, evaluation, evaluator, generate, representation
     from motiongan_jax.bvh import BVHError
     from motiongan_jax.config import ConfigError, config_hash
 
@@ -93,9 +94,14 @@ def main(argv=None) -> int:
             eval_curves += evaluation.file_curves(files[: settings.max_cmu_curves], rate, L, T,
                                                   cfg.data.control_point_interval / dataset.fps, log=print)
         eval_curves += evaluation.shape_curves(rate, speed, L, T, shapes)
-        feet = evaluation.foot_joints(layout)
+        feet = representation.foot_joints(layout)
+        contact = data.contact_height(dataset.train, layout, feet)
+        print(f"contact height {contact * 100:.1f} cm (calibrated on the training clips)")
+        long_curve = evaluation.long_line(rate, speed, settings.long_curve_m)
+        probe = jax.jit(data.make_sample_batch(cfg.data, evaluation.PROBE_WINDOWS))(
+            data.build_arrays(dataset.train, dataset.style_names, cfg.data), jax.random.key(0), 0)
         ctx = evaluation.Context(state, meta, cfg, layout, ev, style_names, dataset.val, rate, feet,
-                                 eval_curves, settings)
+                                 eval_curves, settings, contact, long_curve, probe)
         results = evaluation.evaluate(ctx)
     except (ConfigError, data.DataError, BVHError, checkpoint.CheckpointError, evaluator.EvaluatorError,
             evaluation.EvaluationError, generate.GenerateError) as err:

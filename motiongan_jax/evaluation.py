@@ -20,10 +20,12 @@ from typing import Callable, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy.special
+from scipy.ndimage import gaussian_filter1d
 
 from motiongan_jax import analysis, curves, evaluator, generate, metrics
 from motiongan_jax import step as step_lib
-from motiongan_jax.representation import from_rows, rest_positions
+from motiongan_jax.representation import facing_joints, foot_joints, from_rows, rest_positions
 
 TURNING_DEG = 45.0  # a held-out path whose heading changes more than this is "turning"
 PENETRATION_TOLERANCE_M = 0.02
@@ -48,56 +50,11 @@ class Settings:
     windows_per_curve: int = 4  # curve length L = this × T
     max_heldout_curves: int = 12
     max_cmu_curves: int = 6
+    long_curve_m: float = 60.0  # the drift test's straight line
     interp_steps: int = 5
     search_clips: int = 1  # per style
     search_steps: int = 200
     w_samples: int = 10
-
-
-# ---------------------------------------------------------------------------------------------
-# Feet and floor
-# ---------------------------------------------------------------------------------------------
-
-
-def foot_joints(layout) -> tuple[int, int]:
-    """The two contact joints: the toe joints by name (not end sites), else the lowest rest-pose
-    joint on each side of the body."""
-    names = [n.lower() for n in layout.joint_names]
-    toes = [i for i, n in enumerate(names) if "toe" in n and "end" not in n]
-    if len(toes) == 2:
-        return toes[0], toes[1]
-    if layout.rest_offsets_m is None:
-        raise EvaluationError(f"cannot find the feet of joints {layout.joint_names}")
-    pos = rest_positions(layout)
-    left = [i for i in range(len(pos)) if pos[i, 0] > 0]
-    right = [i for i in range(len(pos)) if pos[i, 0] < 0]
-    if not left or not right:
-        raise EvaluationError(f"cannot find two feet in joints {layout.joint_names}")
-    return min(left, key=lambda i: pos[i, 1]), min(right, key=lambda i: pos[i, 1])
-
-
-def _side(name: str) -> str | None:
-    n = name.lower()
-    if n.startswith(("left", "l_")) or n.endswith(("_l", ".l")):
-        return "left"
-    if n.startswith(("right", "r_")) or n.endswith(("_r", ".r")):
-        return "right"
-    return None
-
-
-def facing_joints(layout) -> tuple[int, int] | None:
-    """(left hip, right hip) for metrics.facing_error_deg: the root's children named left and
-    right (LeftUpLeg / RightUpLeg, UpperLeg_L / UpperLeg_R), else the two furthest apart along x
-    in the rest pose, left at +x (BVH's convention: a body facing +z has its left at +x). None
-    when neither finds two (facing is then not reported)."""
-    children = [k for k, p in enumerate(layout.parents) if p == 0]
-    named = {side: [k for k in children if _side(layout.joint_names[k]) == side] for side in ("left", "right")}
-    if len(named["left"]) == 1 and len(named["right"]) == 1:
-        return named["left"][0], named["right"][0]
-    if layout.rest_offsets_m is None or len(children) < 2:
-        return None
-    pos = rest_positions(layout)
-    return max(children, key=lambda k: pos[k, 0]), min(children, key=lambda k: pos[k, 0])
 
 
 def _heading_change_deg(curve_Lx3) -> float:
@@ -181,6 +138,13 @@ def shape_curves(sample_rate: float, speed: float, L: int, T: int,
     return out
 
 
+def long_line(sample_rate: float, speed: float, length_m: float) -> EvalCurve:
+    """A straight line of `length_m` metres walked at `speed`: the drift test's curve."""
+    arr = generate.prepare_curve(generate.load_curve("line", length=length_m), sample_rate, speed)
+    arr = arr - arr[0] * np.array([1.0, 0.0, 1.0], np.float32)
+    return EvalCurve(f"line_{length_m:g}m", "long", arr.astype(np.float32), f"shape:line:{length_m:g}m")
+
+
 def median_speed(clips, fps: float) -> float:
     """Median walking speed (m/s) of clips: floor path length over duration."""
     s = []
@@ -196,18 +160,70 @@ def median_speed(clips, fps: float) -> float:
 # ---------------------------------------------------------------------------------------------
 
 
+GAIT_KEYS = ("support", "lower_foot_height_m", "alternation", "step_frequency_hz", "step_amplitude_m",
+             "root_height_range_m")
+
+
+def gait_metrics(joints_LxJx3, feet, fps: float, contact_height: float) -> dict:
+    """Does it walk: support, lower-toe height, alternation, step frequency and amplitude (toe
+    heights above the clip's own floor, metrics.toe_heights) and the root's height range."""
+    h = metrics.toe_heights(joints_LxJx3[:, list(feet)])
+    return {"support": metrics.support(h, contact_height), "lower_foot_height_m": metrics.lower_foot_height(h),
+            "alternation": metrics.alternation(h), "step_frequency_hz": metrics.step_frequency_hz(h, fps),
+            "step_amplitude_m": metrics.step_amplitude_m(h),
+            "root_height_range_m": metrics.height_range_m(joints_LxJx3[:, 0])}
+
+
+@dataclasses.dataclass(frozen=True)
+class GaitTrace:
+    style: str
+    source: str  # the held-out clip whose path G walked
+    real_heights_Tx2: np.ndarray  # that clip's toe heights above its floor (left, right), metres
+    gen_heights_Tx2: np.ndarray  # G's, walking the clip's path in the clip's style
+
+
+def gait_traces(state, cfg, layout, val_clips, style_names, feet, sample_rate: float, seconds: float = 6.0,
+                seed: int = 0) -> list[GaitTrace]:
+    """Per style, the first held-out clip of that style and G's walk of its path in its style (one
+    noise draw z from `seed`, phase offset 0), as toe heights at the network's sample rate, over at
+    most `seconds` (a multiple of 8 samples, at least 16)."""
+    step = cfg.data.frame_step
+    out = []
+    for c, name in enumerate(style_names):
+        clip = next((v for v in val_clips if v.label.style == name), None)
+        if clip is None:
+            continue
+        n = min(int(seconds * sample_rate), (len(clip.root_Fx3) - 1) // step + 1) // 8 * 8
+        if n < generate.MIN_T:
+            continue
+        mw = analysis.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=n, frame_step=step,
+                                        interval=cfg.data.control_point_interval, max_windows=1)
+        curve = np.asarray(mw.curve_NxTx3[0], np.float32)
+        z = jax.random.normal(jax.random.fold_in(jax.random.key(seed), c), (1, step_lib.generator_z_dim(state)))
+        gen = generate.generate_motion(state, layout, curve, np.asarray(analysis.latent_codes(state, np.array([c]), z)))
+        real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
+                                    layout), np.float64)
+        out.append(GaitTrace(name, clip.source, metrics.toe_heights(real[:, list(feet)]),
+                             metrics.toe_heights(gen.positions[0][:, list(feet)])))
+    return out
+
+
 def motion_metrics(joints_LxJx3, curve_Lx3, layout, feet, fps: float, contact_height: float) -> dict:
-    """Trajectory (when a curve is given), skating, skeleton, facing and smoothness of one clip."""
+    """Trajectory (when a curve is given), skating, skeleton, facing, smoothness and gait of one
+    clip. Contacts (skating ratio, support) are toes within `contact_height` of the clip's floor."""
     toes = joints_LxJx3[:, list(feet)]
+    toes_on_floor = toes.copy()
+    toes_on_floor[..., 1] = metrics.toe_heights(toes)
     hips = facing_joints(layout)
     out = {
         "facing_error_deg": float("nan") if hips is None else metrics.facing_error_deg(joints_LxJx3, *hips),
         "foot_skate_original_m": metrics.foot_skate_original(toes),
-        "skate_ratio": metrics.skate_ratio(toes, fps, contact_height),
+        "skate_ratio": metrics.skate_ratio(toes_on_floor, fps, contact_height),
         "bone_length_error": metrics.bone_length_error(joints_LxJx3, np.asarray(layout.bone_pairs),
                                                        np.asarray(layout.bone_lengths_m)),
         "ground_penetration": metrics.ground_penetration(toes[..., 1], PENETRATION_TOLERANCE_M),
         "jerk_mps3": metrics.mean_jerk(joints_LxJx3, fps),
+        **gait_metrics(joints_LxJx3, feet, fps, contact_height),
     }
     if curve_Lx3 is not None:
         root = joints_LxJx3[:, 0]
@@ -246,6 +262,9 @@ class Context:
     feet: tuple[int, int]
     curves_: list[EvalCurve]
     settings: Settings
+    contact_height_m: float  # calibrated on the real training clips (data.contact_height)
+    long_curve: EvalCurve | None = None  # tens of metres: does the walk drift?
+    probe_batch: dict | None = None  # real training windows from the run's sampler, for discriminator_probe
 
 
 def _real_block(ctx: Context) -> dict:
@@ -258,8 +277,7 @@ def _real_block(ctx: Context) -> dict:
     joints = np.asarray(from_rows(root, pose, ctx.layout), np.float64)
     shift = generate.floor_shift(joints)
     joints[..., 1] += shift[:, None, None]
-    heights = joints[:, :, list(ctx.feet), 1].reshape(-1)
-    contact = metrics.contact_height_threshold(heights)
+    contact = ctx.contact_height_m
     per = []
     for i in range(len(joints)):
         per.append(motion_metrics(joints[i], None, ctx.layout, ctx.feet, ctx.sample_rate, contact))
@@ -276,8 +294,15 @@ def _real_block(ctx: Context) -> dict:
                      "traj_error_symmetric_m": metrics.trajectory_error_symmetric(r, c.curve_Lx3),
                      "endpoint_error_m": metrics.endpoint_error(r, c.curve_Lx3),
                      "path_length_ratio": metrics.path_length_ratio(r, c.curve_Lx3)})
+    # gait on whole held-out clips at the generated sample rate (a window is too short for a
+    # step frequency); `clips` keyed by source for the same-curve cadence comparison
+    clips = {}
+    for clip in ctx.val_clips:
+        j = np.asarray(from_rows(clip.root_Fx3[::step], clip.pose_FxR[::step], ctx.layout), np.float64)
+        if len(j) >= 4:
+            clips[clip.source] = {"style": clip.label.style, **gait_metrics(j, ctx.feet, ctx.sample_rate, contact)}
     return {"logits": logits, "feats": feats, "labels": labels, "per_window": per, "traj": traj,
-            "contact_height_m": contact, "joints": joints}
+            "contact_height_m": contact, "joints": joints, "clips": clips}
 
 
 def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
@@ -292,7 +317,10 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
     for ci, c in enumerate(ctx.curves_):
         z = jax.random.normal(jax.random.fold_in(key, ci), (C * s.k, Z), jnp.float32)
         w = analysis.latent_codes(ctx.state, labels, z)
-        gen = generate.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, np.asarray(w))
+        # each draw starts its walk at its own gait phase, as in training
+        phase = (np.asarray(jax.random.uniform(jax.random.fold_in(key, 100_000 + ci), (C * s.k,), maxval=2 * np.pi))
+                 if step_lib.has_gait_phase(ctx.state) else None)
+        gen = generate.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, np.asarray(w), phase)
         root = gen.positions[:, :, 0]
         r, p, n = cut_windows(root, gen.pose, T)
         logits, feats = evaluator.classify(ctx.ev, r, p)
@@ -304,9 +332,61 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
         mm_groups.append(clip_feats)
         for b in range(C * s.k):
             m = motion_metrics(gen.positions[b], c.curve_Lx3, ctx.layout, ctx.feet, ctx.sample_rate, contact)
-            rows.append({"curve": c.name, "kind": c.kind, "style": int(labels[b]), **m})
+            rows.append({"curve": c.name, "kind": c.kind, "source": c.source, "style": int(labels[b]), **m})
     return {"rows": rows, "logits": np.concatenate(win_logits), "feats": np.concatenate(win_feats),
             "labels": np.concatenate(win_labels), "mm": np.concatenate(mm_groups)}
+
+
+def _long_curve_block(ctx: Context, seed: int) -> dict:
+    """Every style (one noise draw) along the long curve: gait metrics, averaged over styles."""
+    C = len(ctx.style_names)
+    z = jax.random.normal(jax.random.key(20_000 + seed), (C, step_lib.generator_z_dim(ctx.state)), jnp.float32)
+    w = analysis.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z)
+    gen = generate.generate_motion(ctx.state, ctx.layout, ctx.long_curve.curve_Lx3, np.asarray(w))
+    rows = [gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m) for b in range(C)]
+    return {f"long_{k}": _mean_key(rows, k) for k in GAIT_KEYS}
+
+
+PROBE_WINDOWS = 128  # real training windows the probe judges
+PROBE_SMOOTHING_SAMPLES = 2.0  # Gaussian sigma of the "no steps" window
+PROBE_FLOAT_M = 0.3  # how far the "floating" window's root rises over the window
+
+
+def discriminator_probe(state, batch: dict, key) -> dict:
+    """Can the trained D teach a gait? Its verdict on real training windows and on the same windows
+    turned into a statue gliding along the root (every frame the window's mean pose), smoothed along
+    time (no steps: Gaussian over PROBE_SMOOTHING_SAMPLES samples), floating (the root rising
+    PROBE_FLOAT_M over the window), and on G's output for their curves and labels (z and the gait
+    phase drawn as in training; G's parameters are the state's). Per input: the mean sigmoid of the real/fake logit, and the share
+    judged real (logit > 0). A D that judges a glide or a float as real as a walk gives G no
+    gradient toward planted feet or the floor."""
+    root, pose, labels = (np.asarray(batch[k]) for k in ("root_BxTx3", "pose_BxTxR", "label_B"))
+    B, T, _ = root.shape
+    vel = np.asarray(curves.velocity(jnp.asarray(root)))
+    floating = vel.copy()
+    floating[:, 1:, 1] += PROBE_FLOAT_M / (T - 1)
+    floating[:, 0, 1] = floating[:, 1, 1]
+    z = jax.random.normal(key, (B, step_lib.generator_z_dim(state)), jnp.float32)
+    g = step_lib.generator(state)
+    offset = (jax.random.uniform(jax.random.fold_in(key, 1), (B,), jnp.float32, 0.0, 2 * np.pi)
+              if step_lib.has_gait_phase(state) else None)
+    fake_vel, fake_pose = g(curves.velocity(jnp.asarray(batch["curve_BxTx3"])), g.style(jnp.asarray(labels), z), offset)
+    inputs = {
+        "real windows": (vel, pose),
+        "statue gliding along the root": (vel, np.broadcast_to(pose.mean(1, keepdims=True), pose.shape)),
+        f"pose smoothed along time (sigma {PROBE_SMOOTHING_SAMPLES:g} samples)":
+            (vel, gaussian_filter1d(pose, PROBE_SMOOTHING_SAMPLES, axis=1, mode="nearest")),
+        f"root rising {PROBE_FLOAT_M:g} m over the window": (floating, pose),
+        "G's output for the same curves and labels": (np.asarray(fake_vel), np.asarray(fake_pose)),
+    }
+    d = step_lib.discriminator(state)
+    out = {}
+    for name, (v, p) in inputs.items():
+        logit, _ = d(jnp.asarray(v, jnp.float32), jnp.asarray(p, jnp.float32), update_stats=False,
+                     labels_B=jnp.asarray(labels))
+        logit = np.asarray(logit, np.float64)
+        out[name] = {"p_real": float(np.mean(scipy.special.expit(logit))), "judged_real": float(np.mean(logit > 0))}
+    return out
 
 
 def _style_space_block(ctx: Context, seed: int) -> dict:
@@ -384,7 +464,7 @@ def _search_block(ctx: Context) -> dict:
 
 GEN_KEYS = ("traj_error_original_m", "traj_error_symmetric_m", "endpoint_error_m", "path_length_ratio",
             "foot_skate_original_m", "skate_ratio", "bone_length_error", "ground_penetration", "jerk_mps3",
-            "facing_error_deg")
+            "facing_error_deg") + GAIT_KEYS
 
 
 def _mean_key(rows, key):
@@ -406,22 +486,33 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
         "fmd": metrics.frechet_distance(half_a, half_b) if min(len(half_a), len(half_b)) > 1 else float("nan"),
         "diversity": metrics.diversity(real["feats"], 1000, seed=0),
         **{k: _mean_key(real["traj"] if k.startswith(("traj", "endpoint", "path")) else real["per_window"], k)
-           for k in GEN_KEYS},
+           for k in GEN_KEYS if k not in GAIT_KEYS},
+        **{k: _mean_key(list(real["clips"].values()), k) for k in GAIT_KEYS},
     }
     real_row["jerk_ratio"] = 1.0
+    # the highest root-height range of a real clip: what a long generated walk must stay within
+    real_row["long_root_height_range_m"] = max(r["root_height_range_m"] for r in real["clips"].values())
+    curve_sources = {c.source for c in ctx.curves_}
     real_per_style = {}
     for c in range(C):
+        name = ctx.style_names[c]
         sel = real["labels"] == c
         rows = [r for r, m in zip(real["per_window"], sel) if m]
-        real_per_style[ctx.style_names[c]] = {
+        clip_rows = [r for r in real["clips"].values() if r["style"] == name]
+        real_per_style[name] = {
             "windows": int(sel.sum()),
             "sra_top1": float(np.mean(np.argmax(real["logits"][sel], -1) == c)) if sel.any() else float("nan"),
-            **{k: _mean_key(rows, k) for k in ("foot_skate_original_m", "skate_ratio", "bone_length_error")}}
+            **{k: _mean_key(rows, k) for k in ("foot_skate_original_m", "skate_ratio", "bone_length_error")},
+            **{k: _mean_key(clip_rows, k) for k in GAIT_KEYS},
+            # the clips of this style whose paths are evaluation curves: the same-curve cadence
+            "step_frequency_same_curve_hz": _mean_key(
+                [r for src, r in real["clips"].items() if r["style"] == name and src in curve_sources],
+                "step_frequency_hz")}
 
     per_seed, per_seed_style, confusions = [], [], []
     for seed in s.seeds:
         log(f"seed {seed}: generating {len(ctx.curves_)} curves x {C} styles x {s.k} draws")
-        g = _generate_block(ctx, seed, real["contact_height_m"])
+        g = _generate_block(ctx, seed, ctx.contact_height_m)
         sra = metrics.style_recognition(g["logits"], g["labels"])
         confusions.append(sra["confusion_CxC"])
         row = {"sra_top1": sra["top1"], "sra_top3": sra["top3"],
@@ -434,23 +525,33 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
             rows = [r for r in g["rows"] if r["kind"] == kind]
             row[f"traj_error_original_m[{kind}]"] = _mean_key(rows, "traj_error_original_m")
             row[f"traj_error_symmetric_m[{kind}]"] = _mean_key(rows, "traj_error_symmetric_m")
+        if ctx.long_curve is not None:
+            log(f"seed {seed}: the {ctx.long_curve.name} curve")
+            row.update(_long_curve_block(ctx, seed))
         log(f"seed {seed}: style space")
         row.update(_style_space_block(ctx, seed))
         per_seed.append(row)
         st = {}
         for c in range(C):
+            name = ctx.style_names[c]
             sel = g["labels"] == c
             rows = [r for r in g["rows"] if r["style"] == c]
             rs = real["labels"] == c
-            st[ctx.style_names[c]] = {
+            # cadence on the paths of real clips of the same style, against those clips
+            same = [r for r in rows if real["clips"].get(r["source"], {}).get("style") == name]
+            st[name] = {
                 "sra_top1": float(np.mean(np.argmax(g["logits"][sel], -1) == c)),
                 "fmd": (metrics.frechet_distance(real["feats"][rs], g["feats"][sel])
                         if rs.sum() > 1 and sel.sum() > 1 else float("nan")),
                 **{k: _mean_key(rows, k) for k in ("traj_error_original_m", "foot_skate_original_m",
-                                                  "skate_ratio", "bone_length_error")}}
+                                                  "skate_ratio", "bone_length_error") + GAIT_KEYS},
+                "step_frequency_same_curve_hz": _mean_key(same, "step_frequency_hz")}
+            st[name]["step_frequency_ratio"] = (st[name]["step_frequency_same_curve_hz"]
+                                                / real_per_style[name]["step_frequency_same_curve_hz"])
         per_seed_style.append(st)
     log("style search on held-out clips")
     search = _search_block(ctx)
+    probe = {} if ctx.probe_batch is None else discriminator_probe(ctx.state, ctx.probe_batch, jax.random.key(30_000))
 
     keys = list(per_seed[0])
     generated = {k: _ci([r.get(k, float("nan")) for r in per_seed]) for k in keys}
@@ -463,9 +564,10 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
         "real": real_row,
         "per_style": per_style,
         "search": search,
+        "discriminator_probe": probe,
         "confusion_generated": np.sum(confusions, axis=0).tolist(),
         "confusion_real": real_sra["confusion_CxC"].tolist(),
-        "contact_height_m": real["contact_height_m"],
+        "contact_height_m": ctx.contact_height_m,
         "evaluator_real_heldout": ctx.ev.meta.get("real_heldout"),
         "num_generated_clips_per_seed": len(ctx.curves_) * C * s.k,
         "num_real_windows": int(len(real["labels"])),
@@ -500,6 +602,16 @@ ROWS = [
     ("facing_error_deg", "facing vs travel direction (degrees)"),
     ("ground_penetration", f"frames with a toe > {PENETRATION_TOLERANCE_M * 100:.0f} cm below the floor"),
     ("jerk_ratio", "jerk ratio (generated / real)"),
+    ("support", "support: frames with a toe within the contact height of the floor"),
+    ("lower_foot_height_m", "lower toe's mean height above the floor (m)"),
+    ("alternation", "alternation: −corr(left, right toe height)"),
+    ("step_frequency_hz", "step frequency (gait cycles/s; L−R toe height)"),
+    ("step_amplitude_m", "step amplitude (std of L−R toe height, m)"),
+    ("root_height_range_m", "root height range per clip (m)"),
+    ("long_support", "long curve: support"),
+    ("long_lower_foot_height_m", "long curve: lower toe's mean height (m)"),
+    ("long_alternation", "long curve: alternation"),
+    ("long_root_height_range_m", "long curve: root height range (m; real: the largest of a clip)"),
     ("nearest_centroid_accuracy", "w nearest-centroid accuracy"),
     ("pca_explained_1", "w PCA: variance explained by 1 component"),
     ("pca_explained_2", "w PCA: variance explained by 2 components"),
@@ -552,6 +664,24 @@ def markdown(report: dict) -> str:
         lines.append(f"| {name} | {_fmt(g['sra_top1']['mean'])} | {_fmt(re_['sra_top1'])} | {_fmt(g['fmd']['mean'])} | "
                      f"{_fmt(g['traj_error_original_m']['mean'])} | {_fmt(g['foot_skate_original_m']['mean'])} | "
                      f"{_fmt(re_['foot_skate_original_m'])} | {_fmt(g['bone_length_error']['mean'])} |")
+    lines += ["", f"Gait per style (contact height {_fmt(r['contact_height_m'])} m, calibrated on the real training "
+                  "clips; step frequency in gait cycles/s, on the paths of held-out clips of the same style against "
+                  "those clips):", "",
+              "| style | support gen | support real | lower toe gen (m) | lower toe real (m) | alternation gen | "
+              "alternation real | step freq. gen | step freq. real | ratio |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, v in r["per_style"].items():
+        g, re_ = v["generated"], v["real"]
+        lines.append(f"| {name} | {_fmt(g['support']['mean'])} | {_fmt(re_['support'])} | "
+                     f"{_fmt(g['lower_foot_height_m']['mean'])} | {_fmt(re_['lower_foot_height_m'])} | "
+                     f"{_fmt(g['alternation']['mean'])} | {_fmt(re_['alternation'])} | "
+                     f"{_fmt(g['step_frequency_same_curve_hz']['mean'])} | {_fmt(re_['step_frequency_same_curve_hz'])} | "
+                     f"{_fmt(g['step_frequency_ratio']['mean'])} |")
+    if r.get("discriminator_probe"):
+        lines += ["", "The trained D's verdict (mean P(real), share judged real) on real training windows and "
+                      "on the same windows altered:", "", "| D's input | P(real) | judged real |", "|---|---|---|"]
+        for name, v in r["discriminator_probe"].items():
+            lines.append(f"| {name} | {_fmt(v['p_real'])} | {_fmt(v['judged_real'])} |")
     lines += ["", "Plots: `confusion.png` (generated and real), `pca_w.png`.", ""]
     return "\n".join(lines)
 

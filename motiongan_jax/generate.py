@@ -80,7 +80,7 @@ INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
 # jitted once per shape: one XLA compile of G (~3 s on CPU) instead of op-by-op dispatch (~8 s)
-_apply_g = jax.jit(lambda state, vel, w: step_lib.generator_apply(state, vel, w_BxW=w))
+_apply_g = jax.jit(lambda state, vel, w, phase: step_lib.generator_apply(state, vel, w_BxW=w, phase_offset_B=phase))
 _latent_w = jax.jit(step_lib.latent_w)
 
 
@@ -439,9 +439,10 @@ def floor_shift(positions_BxTxJx3: np.ndarray, percentile: float = FLOOR_PERCENT
     return -np.percentile(lowest, percentile, axis=-1)
 
 
-def generate_motion(state, layout, curve_Tx3, w_BxW) -> Generated:
+def generate_motion(state, layout, curve_Tx3, w_BxW, phase_offset_B=None) -> Generated:
     """Runs G on one curve for a batch of style codes; integrates the root from the curve start
-    and puts each clip's feet on the floor (module doc)."""
+    and puts each clip's feet on the floor (module doc). A G with a gait phase starts each walk at
+    `phase_offset_B` (radians; default 0: the left foot highest)."""
     curve = np.asarray(curve_Tx3, np.float32)
     T = curve.shape[0]
     if curve.ndim != 2 or curve.shape[1] != 3 or T % 8 or T < MIN_T:
@@ -449,7 +450,12 @@ def generate_motion(state, layout, curve_Tx3, w_BxW) -> Generated:
     w = np.asarray(w_BxW, np.float32)
     B = w.shape[0]
     vel = curves.velocity(jnp.broadcast_to(jnp.asarray(curve), (B, T, 3)))
-    root_vel, pose = _apply_g(state, vel, jnp.asarray(w))
+    phase = None
+    if step_lib.has_gait_phase(state):
+        phase = jnp.zeros((B,), jnp.float32) if phase_offset_B is None else jnp.asarray(phase_offset_B, jnp.float32)
+    elif phase_offset_B is not None:
+        raise GenerateError("a phase offset was given, but this model has no gait phase")
+    root_vel, pose = _apply_g(state, vel, jnp.asarray(w), phase)
     root_vel = np.asarray(root_vel, np.float64)
     pose = np.asarray(pose, np.float64)
     start = np.broadcast_to(curve[0].astype(np.float64) * np.array([1.0, 0.0, 1.0]), (B, 3))
@@ -620,7 +626,7 @@ def write_outputs(out, gen: Generated, titles: Sequence[str], layout, fps: float
                          None if z_per_motion is None else z_per_motion[i], log)
         elif suffix in (".gif", ".mp4"):
             viz.animate_motions(list(gen.positions), parents, list(titles), out, fps=fps,
-                                curves=[gen.curve] * B)
+                                curves=[gen.curve] * B, joint_names=layout.joint_names)
         else:
             viz.pose_strips(list(gen.positions), parents, list(titles), out, curves=[gen.curve] * B)
     except RuntimeError as e:  # e.g. ffmpeg vanished between the check and the write

@@ -19,6 +19,9 @@ def _pyplot():
     return plt
 
 
+LEFT_COLOR, RIGHT_COLOR = "tab:orange", "tab:cyan"  # left and right limbs, toes, steps
+
+
 def _bones(parents):
     return [(int(p), c) for c, p in enumerate(parents) if p >= 0]
 
@@ -61,14 +64,27 @@ def _in_view(points, cx, cz, half):
     return pts
 
 
-def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, curves=None,
-                    size: float = 3.0, dpi: int = 60, view: float = 2.5, trail: int = 32) -> Path:
+def _bone_colors(parents, joint_names) -> list[str]:
+    """One colour per bone (as `_bones` orders them): the left limbs' LEFT_COLOR, the right limbs'
+    RIGHT_COLOR, the trunk dark grey; without names every bone is dark grey."""
+    if joint_names is None:
+        return ["0.25"] * len(_bones(parents))
+    from motiongan_jax.representation import joint_side
+
+    side = {"left": LEFT_COLOR, "right": RIGHT_COLOR}
+    return [side.get(joint_side(joint_names[c]), "0.25") for _, c in _bones(parents)]
+
+
+def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, curves=None, joint_names=None,
+                    size: float = 4.0, dpi: int = 90, view: float = 2.2, trail: int = 32) -> Path:
     """Side-by-side 3-D animations with a chase camera, written atomically as .gif or .mp4.
 
     joints_list: list of (T, J, 3) arrays in metres, Y up (the floor is y = 0); parents: joint
-    parents (-1 root); curves: optional list of (P, 3) input curves (None entries allowed), drawn
-    in red for `trail` samples either side of the current one (the reference's ±32); the root's
-    floor trail of the last `trail` samples in blue. The camera looks at a `view`-metre cube
+    parents (-1 root); joint_names (optional): left limbs are drawn in LEFT_COLOR and right ones in
+    RIGHT_COLOR, so that steps can be told apart; curves: optional list of (P, 3) input curves
+    (None entries allowed), drawn in red for `trail` samples either side of the current one (the
+    reference's ±32); the root's floor trail of the last `trail` samples in blue. Panels are
+    `size` inches at `dpi` (360 pixels by default). The camera looks at a `view`-metre cube
     centred on the current root's floor position, so long paths keep the character large.
     Artists are updated in place; the figure is closed afterwards.
     """
@@ -78,6 +94,7 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
     n = len(joints_list)
     T = min(len(j) for j in joints_list)
     bones = _bones(parents)
+    colors = _bone_colors(parents, joint_names)
     fig = plt.figure(figsize=(size * n, size))
     panels = []
     half = view / 2
@@ -91,7 +108,7 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
         curve = None if curves is None or curves[i] is None else np.asarray(curves[i], np.float64)
         red = ax.plot([], [], [], color="red", lw=1)[0]
         blue = ax.plot([], [], [], color="tab:blue", lw=1)[0]
-        lines = [ax.plot([], [], [], color="0.25", lw=2)[0] for _ in bones]
+        lines = [ax.plot([], [], [], color=col, lw=2.2)[0] for col in colors]
         panels.append((ax, joints, curve, red, blue, lines))
 
     def draw(t):
@@ -271,6 +288,39 @@ def plot_metrics(records: list[dict], path, *, keys=("d_total", "g_adv", "g_cls"
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     path = Path(path)
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return path
+
+
+
+def plot_gait(traces, path, *, sample_rate: float, contact_height_m: float, title: str = "") -> Path:
+    """Toe heights over time, one row per style: a real held-out clip (left) and G walking its path
+    in its style (right), left toe and right toe; the band below the contact height shaded. A walk
+    shows flat planted stretches and alternating lifts; a glide shows neither."""
+    plt = _pyplot()
+    n = len(traces)
+    fig, axes = plt.subplots(n, 2, figsize=(10, 1.25 * n + 0.8), sharex=True, sharey=True, squeeze=False)
+    top = max(max(float(t.real_heights_Tx2.max()), float(t.gen_heights_Tx2.max())) for t in traces)
+    for row, tr in zip(axes, traces):
+        for ax, h, what in ((row[0], tr.real_heights_Tx2, "real"), (row[1], tr.gen_heights_Tx2, "generated")):
+            t = np.arange(len(h)) / sample_rate
+            ax.axhspan(0, contact_height_m, color="0.92", lw=0)
+            ax.plot(t, h[:, 0], color=LEFT_COLOR, lw=1.3, label="left toe")
+            ax.plot(t, h[:, 1], color=RIGHT_COLOR, lw=1.3, label="right toe")
+            ax.set_ylim(-0.02, max(top * 1.05, 0.1))
+            ax.text(0.01, 0.95, f"{tr.style} · {what}", transform=ax.transAxes, va="top", fontsize=8)
+            ax.tick_params(labelsize=7)
+    axes[0, 0].legend(loc="upper right", fontsize=7, frameon=False, ncol=2)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)", fontsize=8)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("height (m)", fontsize=7)
+    fig.suptitle(title or "toe heights above the floor: real held-out clips and G on their paths", fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     with atomic.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".") or "png")
     plt.close(fig)

@@ -113,17 +113,17 @@ def test_clip_windows_positions():
 
 def test_foot_joints_by_name_and_by_height():
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    l, r = evaluation.foot_joints(layout)
+    l, r = representation.foot_joints(layout)
     assert {layout.joint_names[l], layout.joint_names[r]} == {"LeftToeBase", "RightToeBase"}
     renamed = layout.__class__(**{**layout.__dict__, "joint_names": tuple(f"j{i}" for i in range(layout.num_joints))})
-    l2, r2 = evaluation.foot_joints(renamed)  # no names: the lowest joint on each side (toe end sites)
+    l2, r2 = representation.foot_joints(renamed)  # no names: the lowest joint on each side (toe end sites)
     rest = representation.rest_positions(layout)
     assert rest[l2, 1] == rest[:, 1].min() or rest[r2, 1] == rest[:, 1].min()
     assert np.sign(rest[l2, 0]) != np.sign(rest[r2, 0])
     # the hips for the facing metric: by name, else by the rest pose (left at +x)
-    left, right = evaluation.facing_joints(layout)
+    left, right = representation.facing_joints(layout)
     assert (layout.joint_names[left], layout.joint_names[right]) == ("LeftUpLeg", "RightUpLeg")
-    l3, r3 = evaluation.facing_joints(renamed)
+    l3, r3 = representation.facing_joints(renamed)
     assert rest[l3, 0] > 0 > rest[r3, 0] and layout.parents[l3] == layout.parents[r3] == 0
 
 
@@ -205,11 +205,24 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     assert r["real"]["facing_error_deg"] < 10.0  # real walkers face where they go, up to pelvis sway
     assert r["real"]["path_length_ratio"] == pytest.approx(1.0, abs=0.05)
     assert r["real"]["jerk_ratio"] == 1.0
+    # gait: the real held-out walks keep a foot down, lift their feet in turn, step at the embedded
+    # styles' rates (0.6-1.3 gait cycles/s) and bounce a few centimetres
+    assert r["contact_height_m"] == pytest.approx(0.02, abs=0.01)
+    assert r["real"]["support"] > 0.95 and r["real"]["lower_foot_height_m"] < 0.005
+    assert r["real"]["alternation"] > 0.4 and 0.6 < r["real"]["step_frequency_hz"] < 1.3
+    assert 0.01 < r["real"]["root_height_range_m"] <= r["real"]["long_root_height_range_m"] < 0.15
+    for key in ("support", "alternation", "step_frequency_hz", "long_support", "long_root_height_range_m"):
+        assert len(gen[key]["per_seed"]) == 3, key
+    for name, v in r["per_style"].items():  # the cadence compared on the paths of the same style's clips
+        assert set(v["generated"]) >= {"step_frequency_same_curve_hz", "step_frequency_ratio", "support"}, name
+    probe = r["discriminator_probe"]
+    assert len(probe) == 5 and all(0.0 <= v["p_real"] <= 1.0 and 0.0 <= v["judged_real"] <= 1.0 for v in probe.values())
     assert np.asarray(r["confusion_generated"]).sum() > 0
     for f in ("report.md", "confusion.png", "pca_w.png"):
         assert (out / f).stat().st_size > 0
     md = (out / "report.md").read_text()
     assert ev.checksum in md and "| style accuracy top-1 (evaluator) |" in md
+    assert "| support: frames with a toe within the contact height of the floor |" in md and "D's input" in md
 
 
 def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
@@ -222,3 +235,31 @@ def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
     assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"), "--seeds", "a,b"]) == 2
     assert "--seeds" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
+    """plot_gait: per style, the toe heights of a held-out clip (as measured directly) beside G's on
+    its path; the CLI writes the figure and refuses bad input with exit 2."""
+    from motiongan_jax import data, generate, metrics
+    from motiongan_jax.representation import from_rows
+
+    state, meta, cfg, layout = checkpoint.load_run(tiny_run)
+    ds = data.load_dataset(cfg.data)
+    feet = representation.foot_joints(layout)
+    rate = generate.sample_rate(meta, cfg)
+    traces = evaluation.gait_traces(state, cfg, layout, ds.val, tuple(meta["style_names"]), feet, rate, seconds=2.0)
+    assert [t.style for t in traces] == sorted({c.label.style for c in ds.val})
+    n = int(2.0 * rate) // 8 * 8
+    for t in traces:
+        chex.assert_shape((t.real_heights_Tx2, t.gen_heights_Tx2), (n, 2))
+        clip = next(c for c in ds.val if c.source == t.source)
+        step = cfg.data.frame_step
+        real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
+                                    layout))
+        np.testing.assert_allclose(t.real_heights_Tx2, metrics.toe_heights(real[:, list(feet)]), atol=1e-9)
+    plot = _load_cli(repo, "plot_gait")
+    assert plot(["--workdir", str(tiny_run), "--out", str(tmp_path / "gait.png"), "--seconds", "2"]) == 0
+    assert (tmp_path / "gait.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert plot(["--workdir", str(tiny_run), "--out", str(tmp_path / "g.png"), "--seconds", "-1"]) == 2
+    assert plot(["--workdir", str(tmp_path / "none"), "--out", str(tmp_path / "g.png")]) == 2
+    assert "error:" in capsys.readouterr().err and not (tmp_path / "g.png").exists()
