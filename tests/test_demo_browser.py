@@ -100,17 +100,18 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
             page.locator("#auto").uncheck()
             empty = _bone_pixels(page.locator("#view").screenshot())
 
-            # draw a wave on the floor canvas (300 px = 16 m: 8 m across, about 10 m long)
+            # draw a wave on the floor canvas (300 px = 16 m: 3.2 m across, under 4.4 m long, so
+            # 40 or 48 samples at 1.2 m/s: the same compiled G as test_pretrained's walks)
             box = page.locator("#floor").bounding_box()
-            x0, y0 = box["x"] + 75, box["y"] + 150
+            x0, y0 = box["x"] + 120, box["y"] + 150
             page.mouse.move(x0, y0)
             page.mouse.down()
-            for i in range(1, 41):
-                t = i / 40
-                page.mouse.move(x0 + 150 * t, y0 + 25 * np.sin(2 * np.pi * t), steps=2)
+            for i in range(1, 31):
+                t = i / 30
+                page.mouse.move(x0 + 60 * t, y0 + 8 * np.sin(2 * np.pi * t), steps=2)
             page.mouse.up()
             length = float(page.locator("#path-length").inner_text().split(" m")[0])
-            assert 8.0 < length < 11.5, length
+            assert 3.0 < length < 4.4, length
 
             page.locator("#mode-label .chip", has_text="OldMan").click()
             seq = page.evaluate("window.demo.state.seq")
@@ -118,7 +119,7 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
             _wait_generated(page, seq)
             assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
             frames = page.evaluate("window.demo.frames")
-            assert frames >= 16 and frames % 8 == 0
+            assert frames in (40, 48), frames
             result = page.evaluate("window.demo.state.result")
             assert [m["title"] for m in result["motions"]] == ["OldMan"]
             assert len(result["motions"][0]["positions"]) == frames

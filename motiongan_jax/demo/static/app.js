@@ -21,7 +21,7 @@
     rate: 1,
     camera: "follow",
     orbit: { yaw: -0.6, pitch: 0.32, dist: 7.5 },
-    follow: { yaw: 0.6, pitch: 0.2, dist: 4.2, smoothYaw: null, smoothTarget: null },
+    follow: { yaw: 0.6, pitch: 0.2, dist: 3.4, smoothYaw: [] },  // smoothYaw: per panel
     inflight: null,       // AbortController of the running generate
     seq: 0,
     frameCount: 0,        // frames drawn (tests read it)
@@ -404,7 +404,6 @@
       S.result = res; S.request = req;
       S.time = keepTime % (res.frames / res.fps);
       S.selected = Math.min(S.selected, res.motions.length - 1);
-      S.follow.smoothTarget = null;
       showError(null);
       $("hint").hidden = true;
       refreshMotions();
@@ -483,7 +482,8 @@
     let r = [-f[2], 0, f[0]];  // f x up (up = +y): screen right
     const rl = Math.hypot(...r) || 1; r = r.map((v) => v / rl);
     const u = [r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]];
-    const focal = (vh / 2) / Math.tan((40 * Math.PI / 180) / 2);
+    // 40 degrees across the panel's shorter side, so a narrow panel still holds the body
+    const focal = (Math.min(vw, vh) / 2) / Math.tan((40 * Math.PI / 180) / 2);
     return {
       eye, f, r, u, focal, vw, vh,
       // camera coordinates of a world point: (right, up, depth)
@@ -530,7 +530,8 @@
     return { c: [(x0 + x1) / 2, 0.9, (z0 + z1) / 2], size: Math.max(x1 - x0, z1 - z0, 3) };
   }
 
-  function drawPanel(g, m, title, vx, vy, vw, vh, f, dt) {
+  function drawPanel(g, m, index, vx, vy, vw, vh, f, dt) {
+    const title = m ? m.title : "";
     g.save();
     g.beginPath(); g.rect(vx, vy, vw, vh); g.clip();
     g.translate(vx, vy);
@@ -543,12 +544,13 @@
     let cam, target;
     if (S.camera === "follow" && pose) {
       const st = S.follow;
-      target = [pose[0][0], 0.85, pose[0][2]];
+      target = [pose[0][0], Math.max(0.3, pose[0][1] - 0.1), pose[0][2]];  // the hips, a little lower
       const h = heading(root, f);
       // the camera trails the walker at a three-quarter angle; yaw eases to changes of heading
-      const want = h === null ? (st.smoothYaw ?? st.yaw) : h + Math.PI + st.yaw;
-      st.smoothYaw = st.smoothYaw === null ? want : lerpAngle(st.smoothYaw, want, Math.min(1, dt * 2.5));
-      cam = makeCamera(target, st.smoothYaw, st.pitch, st.dist, vw, vh);
+      const prev = st.smoothYaw[index];
+      const want = h === null ? (prev ?? st.yaw) : h + Math.PI + st.yaw;
+      st.smoothYaw[index] = prev === undefined ? want : lerpAngle(prev, want, Math.min(1, dt * 2.5));
+      cam = makeCamera(target, st.smoothYaw[index], st.pitch, st.dist, vw, vh);
     } else {
       const b = pathBounds();
       target = b.c;
@@ -660,7 +662,7 @@
     const cw = w / cols, ch = h / rows;
     for (let i = 0; i < n; i++) {
       const cx = (i % cols) * cw, cy = Math.floor(i / cols) * ch;
-      drawPanel(g, ms[i], ms[i] ? ms[i].title : "", cx, cy, cw, ch, f, dt / n);
+      drawPanel(g, ms[i], i, cx, cy, cw, ch, f, dt);
       if (n > 1) {
         g.strokeStyle = i === S.selected ? "rgba(94,200,255,0.75)" : "#283248";
         g.lineWidth = i === S.selected ? 2 : 1;
@@ -722,7 +724,7 @@
     S.time = parseInt(ev.target.value, 10) / S.result.fps;
   });
   $("rate").onchange = (ev) => { S.rate = parseFloat(ev.target.value); };
-  $("camera").onchange = (ev) => { S.camera = ev.target.value; S.follow.smoothYaw = null; };
+  $("camera").onchange = (ev) => { S.camera = ev.target.value; S.follow.smoothYaw = []; };
   $("motion").onchange = (ev) => { S.selected = parseInt(ev.target.value, 10) || 0; };
   $("speed").addEventListener("input", (ev) => {
     $("speed-value").textContent = `${parseFloat(ev.target.value).toFixed(2)} m/s`;
