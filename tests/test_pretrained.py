@@ -220,3 +220,10 @@ def test_generate_cli_uses_the_shipped_model_without_a_workdir(repo, shipped, tm
                  str(47 * SPEED / rate + 1e-6), "--out", str(out)]) == 0
     motion = bvh.read_bvh(out)
     assert motion.num_frames == 48 and motion.frame_time == pytest.approx(1 / 15)
+
+
+def test_analyze_cli_uses_the_shipped_model_without_a_workdir(repo, shipped, tmp_path):
+    assert _cli(repo, "analyze")(["--out", str(tmp_path / "a"), "--k", "2"]) == 0
+    report = json.loads((tmp_path / "a" / "analysis.json").read_text())
+    assert report["workdir"] is None and report["model"] == pretrained.SHIPPED_MODEL.name
+    assert report["step"] == shipped.provenance["steps"] and report["style_names"] == shipped.meta["style_names"]
