@@ -259,10 +259,3 @@ def model_meta(workdir=None, step: int | None = None, model=None) -> dict:
         return checkpoint.read_meta(checkpoint.manager(ckdir), step)[1]
     return read_export(SHIPPED_MODEL if model is None else model).meta
 
-
-def model_label(workdir=None, model=None, meta: dict | None = None) -> str:
-    """A short human description of the model source, for logs and the demo page."""
-    if workdir is not None:
-        return f"run {workdir}"
-    path = Path(SHIPPED_MODEL if model is None else model)
-    return ("shipped model " if model is None else "model ") + path.name
