@@ -82,7 +82,7 @@ def _bone_pixels(png: bytes) -> int:
     return int(sum(n.sum() for n in near))
 
 
-def _wait_generated(page, previous: int, timeout=120_000):
+def _wait_generated(page, previous: int, timeout=300_000):  # the first one compiles G
     page.wait_for_function(f"window.demo.state.seq > {previous} && !window.demo.state.inflight", timeout=timeout)
 
 
