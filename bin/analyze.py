@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Analyse a trained model's style space, and optionally search the style of a motion.
 
-  python bin/analyze.py --workdir DIR --out OUTDIR [--k 10] [--seed 0] [--step N]
+  python bin/analyze.py [--workdir DIR | --model FILE.npz] --out OUTDIR [--k 10] [--seed 0] [--step N]
                         [--search CLIP.bvh|CLIP.npz [--search-curve SHAPE|CURVE.csv|.json]
                          [--search-steps 200] [--search-keep 4] [--search-random 4]
                          [--search-windows 4] [--search-T T] [--search-lr 0.1]]
@@ -20,6 +20,7 @@ With --search (a BVH clip, or an .npz of world positions in metres with the mode
   search.npz    the recovered w, and a walk with it along --search-curve (default s_curve) at the
                 clip's speed: positions (T, J, 3) metres, root, pose rows, curve, joint_names,
                 parents, fps; plus the model's reconstruction of the clip's windows
+Without --workdir or --model: the model shipped with the package.
 Exit status: 0 done, 2 bad input (no checkpoint, unreadable clip, unwritable OUTDIR).
 """
 
@@ -91,10 +92,10 @@ def run(args, log=print) -> dict:
     import numpy as np
 
     from motiongan_jax import analysis as A
-    from motiongan_jax import atomic, checkpoint, viz
+    from motiongan_jax import atomic, pretrained, viz
 
     out = Path(args.out)
-    state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step, args.params)
+    state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
     _check_writable(out)
     names = list(meta["style_names"])
     C = len(names)
@@ -111,7 +112,9 @@ def run(args, log=print) -> dict:
     nearest = A.nearest_styles(dist, names, k=min(3, C - 1))
 
     report = {
-        "workdir": str(args.workdir), "step": int(state.step), "style_names": names, "k": args.k,
+        "workdir": None if args.workdir is None else str(args.workdir),
+        "model": None if args.workdir is not None else str(args.model or pretrained.SHIPPED_MODEL.name),
+        "step": int(state.step), "style_names": names, "k": args.k,
         "seed": args.seed, "use_z": cfg.model.use_z, "w_dim": int(X.shape[1]),
         "pca": {"fit_on": f"{C} x {args.k} codes w = LT(label, z), z ~ N(0, I)"
                           + (" (z = 0: model.use_z is 'zeros')" if cfg.model.use_z == "zeros" else ""),
@@ -192,7 +195,10 @@ def run(args, log=print) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--workdir", required=True, help="a training run's directory (with checkpoints/)")
+    src = ap.add_mutually_exclusive_group()
+    src.add_argument("--workdir", default=None,
+                     help="a training run's directory (with checkpoints/); default: the shipped model")
+    src.add_argument("--model", default=None, help="an export file (bin/export_model.py) instead of a run")
     ap.add_argument("--out", required=True, help="output directory (created)")
     ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
     ap.add_argument("--params", choices=("ema", "raw"), default="ema",

@@ -6,6 +6,10 @@
   python bin/generate.py --workdir runs/cpu --style "OldMan - Normal + Marching" --curve circle --out w.npz
   python bin/generate.py --workdir runs/cpu --figure interp --style Sad,Happy --curve line --length 8 --out fig.png
   python bin/generate.py --workdir runs/cpu --list-styles
+  python bin/generate.py --style Happy --curve s_curve --out walk.gif     # the shipped model
+
+--workdir: a training run (its latest checkpoint, or --step); --model: an export file
+(bin/export_model.py); neither: the model shipped with the package (motiongan_jax/weights/).
 
 --curve: a shape (line, circle, s_curve, figure8, corner; --scale and --length in metres), a CSV
 or JSON file of x,z points in metres, or a BVH file (its pelvis path, at its own speed).
@@ -34,7 +38,10 @@ def _log(msg: str) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--workdir", required=True, help="a training run's directory (with checkpoints/)")
+    src = ap.add_mutually_exclusive_group()
+    src.add_argument("--workdir", default=None,
+                     help="a training run's directory (with checkpoints/); default: the shipped model")
+    src.add_argument("--model", default=None, help="an export file (bin/export_model.py) instead of a run")
     ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
     ap.add_argument("--params", choices=("ema", "raw"), default="ema",
                     help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
@@ -52,7 +59,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bvh-units", choices=("m", "cm"), default="m")
     args = ap.parse_args(argv)
 
-    from motiongan_jax import checkpoint, curves, generate as gen_lib
+    from motiongan_jax import checkpoint, curves, generate as gen_lib, pretrained
     from motiongan_jax.bvh import BVHError
     from motiongan_jax.ik import IKError
 
@@ -60,11 +67,7 @@ def main(argv=None) -> int:
               curves.CurveFileError, BVHError, IKError, OSError)
     try:
         if args.list_styles:
-            ckdir = Path(args.workdir) / "checkpoints"
-            if not ckdir.is_dir():
-                raise checkpoint.CheckpointError(f"no checkpoints in {args.workdir} (expected {ckdir})")
-            _, meta = checkpoint.read_meta(checkpoint.manager(ckdir), args.step)
-            print("\n".join(meta["style_names"]))
+            print("\n".join(pretrained.model_meta(args.workdir, args.step, args.model)["style_names"]))
             return 0
         missing = [f"--{n}" for n in ("curve", "out") if getattr(args, n) is None]
         if args.style is None and args.figure != "styles":
@@ -73,7 +76,7 @@ def main(argv=None) -> int:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
         gen_lib.check_output_path(args.out)  # fail before the model is loaded
         z_arg = args.z
-        state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step, args.params)
+        state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
         names = list(meta["style_names"])
         if args.figure:
             panels = gen_lib.figure_specs(args.figure, args.style, names, args.seed)

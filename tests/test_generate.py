@@ -12,7 +12,6 @@ import os
 import re
 import subprocess
 import sys
-import types
 
 import chex
 import jax
@@ -21,25 +20,11 @@ import pytest
 
 from motiongan_jax import bvh, checkpoint, curves, generate as gen, ik, kinematics, representation, synthetic
 from motiongan_jax import step as step_lib
-from motiongan_jax import train as train_lib
 from motiongan_jax.config import load_config, override, to_dict
+from random_model import random_run as _random_run
 
 T_LONG = 96
 SPEED = 1.2
-
-
-def _random_run(cfg, wd):
-    """A checkpoint of `cfg` with seeded random parameters, saved as training saves one
-    (jax.eval_shape of init_state gives the structure without compiling the initialisers)."""
-    layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    styles = tuple(sorted(synthetic.STYLES))
-    dataset = types.SimpleNamespace(style_names=styles, layout=layout, fps=60.0, data_dir="<test>")
-    like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(styles), jax.random.key(0)))
-    rng = np.random.default_rng(0)
-    state = jax.tree.map(lambda s: rng.normal(0, 0.3, s.shape).astype(s.dtype)
-                         if np.issubdtype(s.dtype, np.floating) else np.zeros(s.shape, s.dtype), like)
-    checkpoint.save(checkpoint.manager(wd / "checkpoints"), 4, state, train_lib.run_meta(cfg, dataset))
-    return wd
 
 
 @pytest.fixture(scope="module")

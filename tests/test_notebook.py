@@ -2,8 +2,8 @@
 
 The code cells run in order in one namespace, as a kernel runs them, with matplotlib's Agg
 backend; like papermill, the test's parameters are applied right after the cell tagged
-"parameters". No WORKDIR is given, so the notebook takes its fallback: it trains the tiny config
-on the embedded dataset (TINY_STEPS steps) and goes on with that checkpoint. The parameters only
+"parameters". No WORKDIR is given, so the notebook takes its fallback: the model shipped with the
+package (motiongan_jax/weights). The parameters only
 shrink what costs time (curve length, search windows and steps); every cell runs as written.
 
 IPython is not a test dependency (without it the notebook prints what it would show); stand-ins
@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "style_space.ipynb"
-PARAMS = dict(TINY_STEPS=20, CURVE_LENGTH_M=1.4, SEARCH_T=32, SEARCH_WINDOWS=1, SEARCH_STEPS=30)
+PARAMS = dict(CURVE_LENGTH_M=1.4, SEARCH_T=32, SEARCH_WINDOWS=1, SEARCH_STEPS=30)
 
 
 def _notebook() -> dict:
@@ -82,18 +82,20 @@ def _execute(nb, params: dict, display: dict) -> dict:
 
 
 @pytest.mark.slow
-def test_notebook_runs_end_to_end_on_the_tiny_fallback(tmp_path, monkeypatch):
+def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     from PIL import Image
 
     monkeypatch.delenv("MOTIONGAN_NOTEBOOK_WORKDIR", raising=False)
     monkeypatch.chdir(NOTEBOOK.parent)  # where Jupyter starts the kernel
     shown: list = []
-    tiny = tmp_path / "tiny"
-    ns = _execute(_notebook(), {**PARAMS, "TINY_WORKDIR": str(tiny)}, _recording_display(shown))
+    ns = _execute(_notebook(), {**PARAMS, "OUT": str(tmp_path / "out")}, _recording_display(shown))
 
-    # the fallback trained the tiny config into TINY_WORKDIR and loaded its checkpoint
-    assert ns["WORKDIR"] == str(tiny) and (tiny / "checkpoints" / str(PARAMS["TINY_STEPS"])).is_dir()
-    assert int(ns["state"].step) == PARAMS["TINY_STEPS"] and ns["cfg"].name == "tiny"
+    # the fallback loaded the shipped model
+    from motiongan_jax import pretrained
+
+    shipped = pretrained.read_export(pretrained.SHIPPED_MODEL)
+    assert ns["WORKDIR"] is None and ns["cfg"].name == shipped.provenance["config_name"]
+    assert int(ns["state"].step) == shipped.provenance["steps"]
     names, codes = ns["names"], ns["codes"]
     C, W = codes.zero_CxW.shape
     assert C == len(names) and W == ns["cfg"].model.w_dim
@@ -109,7 +111,7 @@ def test_notebook_runs_end_to_end_on_the_tiny_fallback(tmp_path, monkeypatch):
     chex.assert_shape(w_interp, (len(ns["alphas"]), W))
     np.testing.assert_allclose(w_interp[[0, -1]], w_ab, rtol=1e-6, atol=1e-7)
     scale = float(np.abs(w_ab).max())
-    assert scale > 1e-3  # styles differ (latent_init torch_default in the fallback)
+    assert scale > 1e-3  # styles differ
     np.testing.assert_allclose(w_interp, ns["w_mix"], atol=1e-5 * scale)
     J = len(ns["layout"].joint_names)
     chex.assert_shape(ns["gen_interp"].positions, (len(ns["alphas"]), T, J, 3))

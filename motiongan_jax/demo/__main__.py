@@ -1,0 +1,5 @@
+import sys
+
+from motiongan_jax.demo.server import main
+
+sys.exit(main())

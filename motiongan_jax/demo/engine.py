@@ -1,0 +1,330 @@
+"""What the demo page asks for, checked and generated: requests in, motions and files out.
+
+No web framework here (server.py is the HTTP side): a request is a plain dict as decoded from
+JSON, checked against the stated limits below, then run through generate.py's public steps
+(parse_style, z_codes, style_codes, prepare_curve, generate_motion, write_outputs), so the page
+gets the same styles, messages and files as bin/generate.py.
+
+Latency. G is jit-compiled once per input shape (a few seconds each), so a freshly drawn path of
+a new length would wait for a compile. Curves are therefore padded to one of a few sample counts
+(SAMPLE_BUCKETS, straight on along the last direction at the same spacing) and the style codes to
+one of a few batch sizes (BATCH_BUCKETS, repeating the last code); the motion is then cut back to
+the curve's own samples and its floor recomputed over them. Padding the batch changes nothing (G
+treats every motion on its own); padding the curve does change the result a little, since G's
+instance norms take their statistics over the whole curve, padding included: the page shows, and
+its downloads contain, the bucketed result. A curve whose sample count is a bucket size is
+generated exactly as bin/generate.py does.
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import math
+import re
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from motiongan_jax import curves
+from motiongan_jax import generate as gen_lib
+
+# Limits the server enforces on every request (each breach is a 400 naming it)
+MAX_POINTS = 20_000  # floor points of a drawn path
+MAX_PATH_M = 60.0  # metres of path
+MAX_STYLES = 6  # panels side by side (one style each)
+MAX_SAMPLES_Z = 4  # K of z = K
+MAX_MOTIONS = 8  # styles x K
+MAX_STYLE_CHARS = 400
+SPEED_RANGE_M_PER_S = (0.3, 3.0)
+MAX_SEED = 2**31 - 1
+GIF_MAX_FRAMES = 300  # 20 s at 15 Hz: matplotlib draws a few frames a second
+STYLE_CACHE = 256  # style codes kept per (styles, z): the same style again costs no G call
+SAMPLE_BUCKETS = (16, 32, 48, 64, 96, 128, 160, 192, 256, 320, 384, 512, 640, 768, 1024)
+BATCH_BUCKETS = (1, 2, 4, 8)
+WARM_MAX_SAMPLES = 256  # warm_up compiles the buckets up to here (21 s of walking at 15 Hz)
+EXPORT_FORMATS = {"bvh": "text/plain", "npz": "application/octet-stream", "gif": "image/gif"}
+DIGITS = 4  # decimals of the metres sent to the page (0.1 mm)
+
+
+class RequestError(ValueError):
+    """A request the demo refuses (malformed, over a limit); the message says which and why."""
+
+
+def bucket(n: int, sizes) -> int:
+    """The smallest size >= n; RequestError past the largest."""
+    for s in sizes:
+        if n <= s:
+            return s
+    raise RequestError(f"{n} exceeds the largest size {sizes[-1]}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Request:
+    points: np.ndarray  # (P, 2) floor points, metres
+    styles: tuple[str, ...]
+    z: str | int
+    seed: int
+    speed: float | None
+
+
+def _number(value, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RequestError(f"{what} must be a number, got {type(value).__name__} {value!r}"[:200])
+    value = float(value)
+    if not math.isfinite(value):
+        raise RequestError(f"{what} must be a finite number, got {value}")
+    return value
+
+
+def _int(value, what: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise RequestError(f"{what} must be an integer {lo}..{hi}, got {value!r}"[:200])
+    return int(value)
+
+
+def parse_points(value, what: str = "points") -> np.ndarray:
+    """(P, 2) float64 from a JSON list of [x, z] pairs in metres, checked against the limits."""
+    if not isinstance(value, list):
+        raise RequestError(f"{what} must be a list of [x, z] pairs in metres")
+    if len(value) > MAX_POINTS:
+        raise RequestError(f"{what}: {len(value)} points; the demo takes at most {MAX_POINTS}")
+    for i, p in enumerate(value):
+        if not (isinstance(p, list) and len(p) == 2):
+            raise RequestError(f"{what}: entry {i} is not an [x, z] pair: {p!r}"[:200])
+        for c in p:
+            _number(c, f"{what}: entry {i}")
+    pts = curves.check_curve(np.array(value, np.float64).reshape(-1, 2), "path")
+    length = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+    if length > MAX_PATH_M:
+        raise RequestError(f"path: {length:.1f} m long; the demo walks at most {MAX_PATH_M:g} m")
+    return pts
+
+
+def parse_request(body) -> Request:
+    """A Request from the decoded JSON body; RequestError (or a curves error) naming the problem."""
+    if not isinstance(body, dict):
+        raise RequestError("the request body must be a JSON object")
+    known = {"points", "styles", "z", "seed", "speed", "format", "index"}
+    unknown = sorted(set(body) - known)
+    if unknown:
+        raise RequestError(f"unknown field(s) {', '.join(map(repr, unknown))}; known: {', '.join(sorted(known))}"[:300])
+    if "points" not in body:
+        raise RequestError("missing 'points': the path as a list of [x, z] pairs in metres")
+    points = parse_points(body["points"])
+    styles = body.get("styles", None)
+    if isinstance(styles, str):
+        styles = [styles]
+    if not isinstance(styles, list) or not styles or not all(isinstance(s, str) for s in styles):
+        raise RequestError("'styles' must be a non-empty list of style strings (a name, a mix "
+                           "'A:0.3,B:0.7' or an expression 'A - B + C')")
+    if len(styles) > MAX_STYLES:
+        raise RequestError(f"{len(styles)} styles; the demo shows at most {MAX_STYLES} side by side")
+    for s in styles:
+        if len(s) > MAX_STYLE_CHARS:
+            raise RequestError(f"a style of {len(s)} characters; at most {MAX_STYLE_CHARS}")
+    z = body.get("z", "zero")
+    if isinstance(z, str) and z.strip().isdigit():
+        z = int(z)
+    if isinstance(z, str):
+        if z.strip().lower() not in ("zero", "seed"):
+            raise RequestError(f"'z' must be 'zero', 'seed' or a number of samples, got {z!r}"[:200])
+    else:
+        z = _int(z, "'z' (the number of samples)", 1, MAX_SAMPLES_Z)
+    seed = _int(body.get("seed", 0), "'seed'", 0, MAX_SEED)
+    speed = body.get("speed", None)
+    if speed is not None:
+        speed = _number(speed, "'speed'")
+        lo, hi = SPEED_RANGE_M_PER_S
+        if not lo <= speed <= hi:
+            raise RequestError(f"'speed' must be {lo:g}..{hi:g} m/s, got {speed:g}")
+    return Request(points, tuple(styles), z, seed, speed)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Result:
+    generated: gen_lib.Generated  # cut to the curve's samples
+    titles: tuple[str, ...]
+    z_per_motion: np.ndarray  # (B, z_dim)
+    notes: tuple[str, ...]
+    samples_bucket: int
+    batch_bucket: int
+
+
+def _extend_straight(curve_Tx3: np.ndarray, n: int) -> np.ndarray:
+    """The curve with n more samples straight on along its last direction at its last spacing."""
+    if n == 0:
+        return curve_Tx3
+    d = curve_Tx3[-1] - curve_Tx3[-2]
+    return np.concatenate([curve_Tx3, curve_Tx3[-1] + d * np.arange(1, n + 1, dtype=np.float32)[:, None]])
+
+
+def _safe_name(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")[:60] or "walk"
+
+
+class Engine:
+    """A loaded model and what the page does with it. Thread-safe: jitted calls may run from
+    several request threads at once; nothing mutable is shared but the compile caches."""
+
+    def __init__(self, state, meta: dict, cfg, layout, title: str = "", details: str = ""):
+        self.state, self.meta, self.cfg, self.layout = state, meta, cfg, layout
+        self.style_names = list(meta["style_names"])
+        self.rate = gen_lib.sample_rate(meta, cfg)
+        self.title, self.details = title, details
+        self._warm = threading.Event()
+        self._codes: collections.OrderedDict = collections.OrderedDict()
+        self._codes_lock = threading.Lock()
+
+    # -- model facts for the page ---------------------------------------------------------------
+    def info(self) -> dict:
+        return {
+            "model": self.title, "model_details": self.details, "style_names": self.style_names,
+            "joint_names": list(self.layout.joint_names), "parents": list(self.layout.parents),
+            "fps": self.rate, "default_speed": gen_lib.DEFAULT_SPEED_M_PER_S, "shapes": list(curves.SHAPES),
+            "limits": {"max_points": MAX_POINTS, "max_path_m": MAX_PATH_M, "max_styles": MAX_STYLES,
+                       "max_samples_z": MAX_SAMPLES_Z, "max_motions": MAX_MOTIONS,
+                       "max_samples": SAMPLE_BUCKETS[-1], "speed_m_per_s": list(SPEED_RANGE_M_PER_S),
+                       "gif_max_frames": GIF_MAX_FRAMES},
+            "warm": self._warm.is_set(),
+        }
+
+    def check_style(self, text) -> dict:
+        """The parsed form of one style string (the page's live check); StyleError as generate.py."""
+        if not isinstance(text, str) or len(text) > MAX_STYLE_CHARS:
+            raise RequestError(f"'style' must be a string of at most {MAX_STYLE_CHARS} characters")
+        spec = self._spec(text, 0)
+        return {"kind": spec.kind, "text": spec.text, "terms": [[n, c] for n, c in spec.terms]}
+
+    def _spec(self, text: str, seed: int) -> gen_lib.StyleSpec:
+        # a .npy/.txt w file would be read from the server's disk: not from a web page
+        if text.strip().lower().endswith((".npy", ".txt")):
+            raise gen_lib.StyleError(f"style {text!r}: w files are not accepted by the demo (use "
+                                     "bin/generate.py); give a name, a mix or an expression")
+        return gen_lib.parse_style(text, self.style_names, seed)
+
+    def shape(self, name, length=None, scale=2.0) -> np.ndarray:
+        """A built-in shape's floor points (generate.load_curve), at most a few hundred."""
+        if not isinstance(name, str) or name not in curves.SHAPES:
+            raise RequestError(f"unknown shape {name!r}; valid shapes: {', '.join(curves.SHAPES)}"[:200])
+        length = None if length is None else _number(length, "'length'")
+        scale = _number(scale, "'scale'")
+        if length is not None and not 0 < length <= MAX_PATH_M:
+            raise RequestError(f"'length' must be in (0, {MAX_PATH_M:g}] m, got {length:g}")
+        if not 0 < scale <= MAX_PATH_M:
+            raise RequestError(f"'scale' must be in (0, {MAX_PATH_M:g}] m, got {scale:g}")
+        pts = gen_lib.load_curve(name, length=length, scale=scale).points
+        total = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+        if total > MAX_PATH_M:
+            raise RequestError(f"shape {name} at scale {scale:g} m is {total:.1f} m long; the demo "
+                               f"walks at most {MAX_PATH_M:g} m")
+        return curves.resample_polyline(pts, num_points=int(min(max(total / 0.05, 2), 1200)) + 1)
+
+    # -- generation -----------------------------------------------------------------------------
+    def run(self, req: Request) -> Result:
+        specs = [self._spec(s, req.seed) for s in req.styles]
+        z = gen_lib.z_codes(self.state, req.z, req.seed)
+        if len(specs) * len(z) > MAX_MOTIONS:
+            raise RequestError(f"{len(specs)} styles x {len(z)} samples = {len(specs) * len(z)} "
+                               f"motions; the demo makes at most {MAX_MOTIONS} at once")
+        notes: list[str] = []
+        curve_T = gen_lib.prepare_curve(gen_lib.Curve(req.points, "path"), self.rate, req.speed, log=notes.append)
+        T = len(curve_T)
+        if T > SAMPLE_BUCKETS[-1]:
+            speed = req.speed or gen_lib.DEFAULT_SPEED_M_PER_S
+            raise RequestError(f"path: {T} samples at {speed:g} m/s ({T / self.rate:.0f} s of walking); "
+                               f"the demo walks at most {SAMPLE_BUCKETS[-1]} "
+                               f"({SAMPLE_BUCKETS[-1] / self.rate:.0f} s): draw a shorter path or walk faster")
+        w = self._style_codes(specs, z)
+        B = len(w)
+        Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
+        w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
+        full = gen_lib.generate_motion(self.state, self.layout, _extend_straight(curve_T, Tb - T), w_pad)
+        raw = full.positions[:B, :T].copy()
+        raw[..., 1] -= full.floor_shift_m[:B, None, None]
+        shift = gen_lib.floor_shift(raw)
+        raw[..., 1] += shift[:, None, None]
+        cut = gen_lib.Generated(raw, full.root_velocity[:B, :T], full.pose[:B, :T], curve_T, w, shift)
+        titles = tuple(t if len(z) == 1 else f"{t} z{k}" for t in (s.text for s in specs) for k in range(len(z)))
+        zs = np.concatenate([z] * len(specs))
+        return Result(cut, titles, zs, tuple(notes), Tb, Bb)
+
+    def _style_codes(self, specs, z) -> np.ndarray:
+        """generate.style_codes, remembered for the last STYLE_CACHE (styles, z): moving the
+        speed or redrawing the path reuses them."""
+        key = (tuple((s.kind, s.terms) for s in specs), z.tobytes())
+        with self._codes_lock:
+            if key in self._codes:
+                self._codes.move_to_end(key)
+                return self._codes[key]
+        w = gen_lib.style_codes(self.state, specs, self.style_names, z)
+        w.setflags(write=False)  # shared by the requests that hit the cache
+        with self._codes_lock:
+            self._codes[key] = w
+            while len(self._codes) > STYLE_CACHE:
+                self._codes.popitem(last=False)
+        return w
+
+    def generate(self, body) -> dict:
+        """The page's /api/generate: motions as nested lists (metres, DIGITS decimals)."""
+        t0 = time.perf_counter()
+        res = self.run(parse_request(body))
+        g = res.generated
+        t1 = time.perf_counter()
+        out = {
+            "fps": self.rate, "frames": int(g.positions.shape[1]),
+            "curve": np.round(g.curve[:, [0, 2]].astype(np.float64), DIGITS).tolist(),
+            "length_m": float(np.sum(np.linalg.norm(np.diff(g.curve, axis=0), axis=1))),
+            "motions": [{"title": t, "positions": np.round(p, DIGITS).tolist()}
+                        for t, p in zip(res.titles, g.positions)],
+            "notes": list(res.notes), "samples_bucket": res.samples_bucket, "batch_bucket": res.batch_bucket,
+        }
+        out["server_ms"] = {"generate": round(1e3 * (t1 - t0), 2),
+                            "serialise": round(1e3 * (time.perf_counter() - t1), 2)}
+        return out
+
+    def export(self, body) -> tuple[bytes, str, str]:
+        """(file bytes, file name, MIME type) of /api/export: the motion `index` as .bvh/.npz, or
+        every motion side by side as .gif, written by generate.write_outputs."""
+        if not isinstance(body, dict):
+            raise RequestError("the request body must be a JSON object")
+        fmt = body.get("format")
+        if fmt not in EXPORT_FORMATS:
+            raise RequestError(f"'format' must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}"[:200])
+        res = self.run(parse_request(body))
+        g = res.generated
+        B, T = g.positions.shape[:2]
+        if fmt == "gif":
+            if T > GIF_MAX_FRAMES:
+                raise RequestError(f"GIF export takes at most {GIF_MAX_FRAMES} frames "
+                                   f"({GIF_MAX_FRAMES / self.rate:.0f} s); this walk has {T}: "
+                                   "download the BVH or NPZ")
+            pick, titles, zs = g, res.titles, list(res.z_per_motion)
+            name = "motiongan_" + _safe_name("_".join(res.titles)) + ".gif"
+        else:
+            i = _int(body.get("index", 0), "'index'", 0, B - 1)
+            pick = gen_lib.Generated(g.positions[i:i + 1], g.root_velocity[i:i + 1], g.pose[i:i + 1],
+                                     g.curve, g.w[i:i + 1], g.floor_shift_m[i:i + 1])
+            titles, zs = (res.titles[i],), [res.z_per_motion[i]]
+            name = f"motiongan_{_safe_name(res.titles[i])}.{fmt}"
+        with tempfile.TemporaryDirectory(prefix="motiongan-demo-") as tmp:
+            paths = gen_lib.write_outputs(Path(tmp) / name, pick, titles, self.layout, self.rate,
+                                          z_per_motion=zs)
+            return paths[0].read_bytes(), name, EXPORT_FORMATS[fmt]
+
+    # -- warm-up --------------------------------------------------------------------------------
+    def warm_up(self, max_samples: int = WARM_MAX_SAMPLES, batches=(1,)) -> float:
+        """Compiles G for every sample bucket up to `max_samples` and the given batch buckets (and
+        the style codes for z = zero), so the first drawn paths do not wait; returns seconds."""
+        t0 = time.perf_counter()
+        name = self.style_names[0]
+        for b in batches:
+            for T in (t for t in SAMPLE_BUCKETS if t <= max_samples):
+                # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
+                pts = np.array([[0.0, 0.0], [(T - 0.5) * gen_lib.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
+                self.run(Request(pts, (name,) * b, "zero", 0, None))
+        self._warm.set()
+        return time.perf_counter() - t0

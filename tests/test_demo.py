@@ -1,0 +1,276 @@
+"""The demo's JSON API and request checks (motiongan_jax/demo), through Flask's test client.
+
+The model is the tiny config with seeded random parameters (random_model): the API's job is to
+check requests and pass them through generate.py unchanged, which a random G shows as well as a
+trained one, and it compiles in a fraction of the time. The page itself: test_demo_browser.py.
+"""
+
+import concurrent.futures
+import io
+import json
+import re
+import threading
+import urllib.request
+
+import chex
+import numpy as np
+import pytest
+
+pytest.importorskip("flask")
+
+from motiongan_jax import bvh, checkpoint, curves  # noqa: E402
+from motiongan_jax import generate as gen  # noqa: E402
+from motiongan_jax.config import load_config  # noqa: E402
+from motiongan_jax.demo import engine as E  # noqa: E402
+from motiongan_jax.demo import server  # noqa: E402
+from random_model import random_run  # noqa: E402
+
+RATE = 15.0
+SPEED = 1.2
+
+
+@pytest.fixture(scope="module")
+def model(repo, tmp_path_factory):
+    return checkpoint.load_run(random_run(load_config(repo / "configs" / "tiny.py"), tmp_path_factory.mktemp("demo_run")))
+
+
+@pytest.fixture(scope="module")
+def engine(model):
+    return E.Engine(*model, title="tiny", details="tiny random")
+
+
+@pytest.fixture(scope="module")
+def client(engine):
+    return server.create_app(engine).test_client()
+
+
+def _line(T):
+    """Floor points of a straight path that resamples to exactly T samples at SPEED."""
+    return [[0.0, 0.0], [(T - 0.5) * SPEED / RATE, 0.0]]
+
+
+def _arc(T):
+    """Floor points of a circular arc (radius 2 m) that resamples to exactly T samples at SPEED.
+    (On a straight line at constant speed G's instance norms see channels that are constant in
+    time, so its output there depends on float rounding, e.g. on the batch size.)"""
+    return curves.shape_curve("circle", length=(T - 0.5) * SPEED / RATE, scale=2.0, num_points=400).tolist()
+
+
+def _direct(engine, points, styles, z="zero", seed=0):
+    """What bin/generate.py's steps give for the same request, without the demo."""
+    curve = gen.prepare_curve(gen.Curve(np.asarray(points, float), "path"), RATE, SPEED)
+    specs = [gen.parse_style(s, engine.style_names, seed) for s in styles]
+    w = gen.style_codes(engine.state, specs, engine.style_names, gen.z_codes(engine.state, z, seed))
+    return gen.generate_motion(engine.state, engine.layout, curve, w), specs
+
+
+def _post(client, path, body):
+    return client.post(path, json=body)
+
+
+def test_page_and_model_info_are_served_from_the_package_alone(client, engine):
+    page = client.get("/")
+    assert page.status_code == 200 and b"<canvas id=\"view\"" in page.data
+    html = page.data.decode()
+    refs = re.findall(r'(?:src|href)="([^"]+)"', html)
+    assert refs and all(r.startswith("/static/") or r.startswith("data:") for r in refs), refs
+    for r in refs:
+        if r.startswith("/static/"):
+            body = client.get(r).data.decode()
+            assert not re.search(r"https?://", body), f"{r} refers to another site"
+    info = client.get("/api/model").get_json()
+    assert info["style_names"] == engine.style_names and info["fps"] == RATE
+    assert info["parents"] == list(engine.layout.parents) and info["shapes"] == list(curves.SHAPES)
+    assert info["limits"]["max_path_m"] == E.MAX_PATH_M
+    assert client.get("/static/../server.py").status_code == 404
+
+
+def test_generate_at_a_bucket_size_is_what_generate_py_makes(client, engine):
+    styles = ["Happy", "Sad:0.3,Happy:0.7", "OldMan - Normal + Marching", "drunk"]  # batch 4: a bucket
+    r = _post(client, "/api/generate", {"points": _line(32), "styles": styles, "speed": SPEED})
+    assert r.status_code == 200, r.get_json()
+    out = r.get_json()
+    J = len(engine.layout.joint_names)
+    assert out["frames"] == 32 and out["samples_bucket"] == 32 and out["batch_bucket"] == 4
+    direct, specs = _direct(engine, _line(32), styles)
+    assert [m["title"] for m in out["motions"]] == [s.text for s in specs]
+    for m, want in zip(out["motions"], direct.positions):
+        got = np.array(m["positions"])
+        chex.assert_shape(got, (32, J, 3))
+        np.testing.assert_allclose(got, want, atol=0.6 * 10 ** -E.DIGITS)  # rounded to DIGITS decimals
+    np.testing.assert_allclose(np.array(out["curve"]), direct.curve[:, [0, 2]], atol=1e-4)
+    assert out["length_m"] == pytest.approx(31 * SPEED / RATE, rel=1e-4)
+
+
+def test_a_new_length_in_a_bucket_does_not_compile_again(engine):
+    base = E.parse_request({"points": _line(48), "styles": ["Happy"], "speed": SPEED})
+    engine.run(base)
+    compiled = gen._apply_g._cache_size()
+    res = engine.run(E.parse_request({"points": _line(40), "styles": ["Sad"], "speed": SPEED}))
+    assert res.generated.positions.shape[1] == 40 and res.samples_bucket == 48  # padded to 48
+    assert gen._apply_g._cache_size() == compiled
+
+
+def test_padding_keeps_the_motion_on_its_curve_and_its_feet_on_the_floor(engine):
+    res = engine.run(E.parse_request({"points": _arc(40), "styles": ["Happy", "Drunk"], "speed": SPEED}))
+    g = res.generated
+    chex.assert_shape(g.positions, (2, 40, len(engine.layout.joint_names), 3))
+    chex.assert_shape(g.curve, (40, 3))
+    lowest = g.positions[..., 1].min(axis=-1)
+    np.testing.assert_allclose(np.percentile(lowest, gen.FLOOR_PERCENTILE, axis=-1), 0.0, atol=1e-9)
+    # a padded batch gives each motion what it gets alone (G treats motions independently), up to
+    # float rounding in programs compiled for another batch size
+    alone = engine.run(E.parse_request({"points": _arc(40), "styles": ["Happy"], "speed": SPEED})).generated
+    np.testing.assert_allclose(g.positions[0], alone.positions[0], atol=1e-4)  # 0.1 mm
+
+
+def test_z_samples_and_seeds(client):
+    body = {"points": _line(32), "styles": ["Happy"], "z": 3, "seed": 5}
+    out = _post(client, "/api/generate", body).get_json()
+    assert [m["title"] for m in out["motions"]] == ["Happy z0", "Happy z1", "Happy z2"]
+    p = [np.array(m["positions"]) for m in out["motions"]]
+    assert np.abs(p[0] - p[1]).max() > 1e-3  # different z, different walks
+    again = _post(client, "/api/generate", body).get_json()
+    assert again["motions"] == out["motions"]  # same seed, same walks
+    other = _post(client, "/api/generate", {**body, "seed": 6}).get_json()
+    assert np.abs(np.array(other["motions"][0]["positions"]) - p[0]).max() > 1e-3
+
+
+def _style_error(text, names):
+    with pytest.raises(gen.StyleError) as e:
+        gen.parse_style(text, names)
+    return str(e.value)
+
+
+@pytest.mark.parametrize("change, status, match", [
+    ({"styles": ["Hapy"]}, 400, None),  # the message is generate.py's (checked below)
+    ({"styles": ["OldMan - - Normal"]}, 400, None),
+    ({"styles": ["Sad:0.5,Sad:0.5"]}, 400, None),
+    ({"styles": ["w.npy"]}, 400, "w files are not accepted"),
+    ({"styles": []}, 400, "non-empty list"),
+    ({"styles": ["Happy"] * (E.MAX_STYLES + 1)}, 400, "at most 6 side by side"),
+    ({"styles": ["x" * (E.MAX_STYLE_CHARS + 1)]}, 400, "at most 400"),
+    ({"points": [[0, 0]]}, 400, "needs at least 2 points"),
+    ({"points": [[1, 1], [1, 1], [1, 1]]}, 400, "zero length"),
+    ({"points": [[0, 0], [1, "a"]]}, 400, "must be a number"),
+    ({"points": [[0, 0], [1, True]]}, 400, "must be a number"),
+    ({"points": [[0, 0], [1, 2, 3]]}, 400, "not an \\[x, z\\] pair"),
+    ({"points": "0,0 1,1"}, 400, "must be a list"),
+    ({"points": [[0, 0], [1e308, 0], [-1e308, 0]]}, 400, "at most 60 m"),
+    ({"points": [[0, 0], [E.MAX_PATH_M + 1, 0]]}, 400, "61.0 m long; the demo walks at most 60 m"),
+    ({"points": [[i * 1e-4, 0] for i in range(E.MAX_POINTS + 1)]}, 400, "at most 20000"),
+    ({"z": 99}, 400, "integer 1..4"),
+    ({"z": "many"}, 400, "'z' must be"),
+    ({"seed": -1}, 400, "'seed' must be an integer"),
+    ({"speed": 0.0}, 400, "0.3..3 m/s"),
+    ({"speed": "fast"}, 400, "must be a number"),
+    ({"colour": "red"}, 400, "unknown field"),
+    ({"styles": ["Happy"] * 3, "z": 3}, 400, "at most 8 at once"),
+])
+def test_bad_requests_are_400s_naming_the_problem(client, engine, change, status, match):
+    body = {"points": _line(32), "styles": ["Happy"], **change}
+    r = _post(client, "/api/generate", body)
+    assert r.status_code == status, r.get_json()
+    msg = r.get_json()["error"]
+    if match is None:
+        assert msg == _style_error(body["styles"][0], engine.style_names)
+    else:
+        assert re.search(match, msg), msg
+
+
+def test_non_json_bodies_non_finite_numbers_and_oversized_bodies(client):
+    for data in ("not json", "[1, 2]", '{"points": [[0, 0], [NaN, 1]], "styles": ["Happy"]}',
+                 '{"points": [[0, 0], [Infinity, 1]], "styles": ["Happy"]}'):
+        r = client.post("/api/generate", data=data, content_type="application/json")
+        assert r.status_code == 400 and r.get_json()["error"], data
+    assert "finite" in client.post("/api/generate", data='{"points": [[0,0],[NaN,1]], "styles": ["Happy"]}',
+                                   content_type="application/json").get_json()["error"]
+    big = json.dumps({"points": _line(32), "styles": ["Happy"], "pad": "x" * server.MAX_BODY_BYTES})
+    r = client.post("/api/generate", data=big, content_type="application/json")
+    assert r.status_code == 413 and "too large" in r.get_json()["error"]
+    # too long to walk at the slowest speed: the sample limit, before G runs
+    r = _post(client, "/api/generate", {"points": [[0, 0], [50, 0]], "styles": ["Happy"], "speed": 0.3})
+    assert r.status_code == 400 and "at most 1024" in r.get_json()["error"]
+    # and the server still answers
+    assert _post(client, "/api/generate", {"points": _line(32), "styles": ["Happy"]}).status_code == 200
+
+
+def test_style_check_and_shapes(client, engine):
+    r = _post(client, "/api/style", {"style": "oldman - Normal + 0.5*Marching"})
+    assert r.get_json() == {"kind": "expr", "text": "OldMan - Normal + 0.5*Marching",
+                            "terms": [["OldMan", 1.0], ["Normal", -1.0], ["Marching", 0.5]]}
+    r = _post(client, "/api/style", {"style": "OldMan +"})
+    assert r.status_code == 400 and r.get_json()["error"] == _style_error("OldMan +", engine.style_names)
+    pts = np.array(client.get("/api/shape?name=circle&scale=2").get_json()["points"])
+    np.testing.assert_allclose(np.linalg.norm(pts - [0, 2], axis=1), 2.0, atol=1e-3)  # radius 2 about (0, 2)
+    L = np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1))
+    assert L == pytest.approx(2 * np.pi * 2, rel=1e-3)
+    assert client.get("/api/shape?name=spiral").status_code == 400
+    assert client.get("/api/shape?name=line&length=1000").status_code == 400
+    assert client.get("/api/shape?name=line&length=x").status_code == 400
+
+
+def test_exports_are_written_by_generate_py_writers(client, engine, tmp_path, monkeypatch):
+    body = {"points": _line(32), "styles": ["Happy", "Sad"]}
+    shown = _post(client, "/api/generate", body).get_json()
+    r = _post(client, "/api/export", {**body, "format": "bvh", "index": 1})
+    assert r.status_code == 200 and 'filename="motiongan_Sad.bvh"' in r.headers["Content-Disposition"]
+    (tmp_path / "a.bvh").write_bytes(r.data)
+    motion = bvh.read_bvh(tmp_path / "a.bvh")
+    assert motion.num_frames == 32 and motion.frame_time == pytest.approx(1 / RATE)
+    res = engine.run(E.parse_request(body))
+    gen.save_bvh(tmp_path / "b.bvh", res.generated.positions[1], engine.layout, RATE)
+    assert (tmp_path / "b.bvh").read_bytes() == r.data
+
+    r = _post(client, "/api/export", {**body, "format": "npz", "index": 0})
+    z = np.load(io.BytesIO(r.data))
+    np.testing.assert_allclose(z["positions"], np.array(shown["motions"][0]["positions"]), atol=1e-4)
+    assert str(z["style"]) == "Happy" and float(z["fps"]) == RATE
+
+    monkeypatch.setattr(E, "GIF_MAX_FRAMES", 16)
+    r = _post(client, "/api/export", {"points": _line(16), "styles": ["Happy"], "format": "gif"})
+    assert r.status_code == 200 and r.data[:6] == b"GIF89a"
+    from PIL import Image
+
+    assert Image.open(io.BytesIO(r.data)).n_frames == 16
+    r = _post(client, "/api/export", {**body, "format": "gif"})
+    assert r.status_code == 400 and "at most 16 frames" in r.get_json()["error"]
+    assert _post(client, "/api/export", {**body, "format": "bvh", "index": 2}).status_code == 400
+    assert _post(client, "/api/export", {**body, "format": "exe"}).status_code == 400
+
+
+def test_concurrent_requests_each_get_their_own_answer(engine, client):
+    """Eight requests at once against the threaded server give what each gives alone."""
+    from werkzeug.serving import make_server
+
+    app = server.create_app(engine)
+    srv = make_server("127.0.0.1", 0, app, threaded=True)
+    thread = threading.Thread(target=srv.serve_forever, daemon=True)
+    thread.start()
+    try:
+        bodies = [{"points": _line(32), "styles": [s], "seed": i} for i, s in enumerate(engine.style_names[:8])]
+        want = [_post(client, "/api/generate", b).get_json()["motions"] for b in bodies]
+
+        def ask(b):
+            req = urllib.request.Request(f"http://127.0.0.1:{srv.server_port}/api/generate",
+                                         data=json.dumps(b).encode(), headers={"Content-Type": "application/json"})
+            with urllib.request.urlopen(req, timeout=120) as resp:
+                return json.loads(resp.read())["motions"]
+
+        with concurrent.futures.ThreadPoolExecutor(8) as pool:
+            got = list(pool.map(ask, bodies))
+        assert got == want
+    finally:
+        srv.shutdown()
+        thread.join(10)
+
+
+def test_cli_refuses_bad_arguments(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        server.main(["--port", "70000"])
+    assert e.value.code == 2
+    with pytest.raises(SystemExit) as e:
+        server.main(["--workdir", "a", "--model", "b"])
+    assert e.value.code == 2
+    assert server.main(["--model", str(tmp_path / "missing.npz")]) == 2
+    assert "not found" in capsys.readouterr().err

@@ -1,0 +1,174 @@
+"""The demo page in a real browser: Debian's chromium driven by Playwright (never `playwright
+install`). The server is `python -m motiongan_jax.demo` on a free port with the shipped model.
+
+Draws a path with mouse events, picks a style, then a mix of two, checks that the animation
+runs and that the canvas shows the skeleton (pixels of the bones' colours that were not there
+before), downloads the BVH and reads it with bvh.py, and types a bad expression to see generate's
+message on the page. Without chromium or Playwright it fails under CI (which installs both, see
+.ci/run) and skips elsewhere, saying what to install.
+"""
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from motiongan_jax import bvh, pretrained
+from motiongan_jax import generate as gen
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run"]
+LEFT_RGB, RIGHT_RGB = (94, 200, 255), (255, 176, 103)  # the page's bone colours (app.js)
+
+
+def _need(what: str, hint: str):
+    msg = f"the browser test needs {what}: {hint}"
+    if os.environ.get("CI"):
+        pytest.fail(msg)
+    pytest.skip(msg)
+
+
+@pytest.fixture(scope="module")
+def playwright_api():
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        _need("Playwright", "pip install -e '.[test]'")
+    if not os.path.isfile(CHROMIUM):
+        _need("Debian's chromium", "apt-get install chromium")
+    return sync_playwright
+
+
+@pytest.fixture(scope="module")
+def demo_url():
+    """`python -m motiongan_jax.demo --port 0`: the URL it prints; stopped afterwards."""
+    proc = subprocess.Popen([sys.executable, "-m", "motiongan_jax.demo", "--port", "0", "--no-warm-up"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    url, lines, deadline = None, [], time.monotonic() + 180
+    try:
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            m = re.search(r"serving on (http://127\.0\.0\.1:\d+/)", line)
+            if m:
+                url = m.group(1)
+                break
+        assert url, "the demo did not print its URL:\n" + "".join(lines)
+        yield url
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def _bone_pixels(png: bytes) -> int:
+    """Pixels within a few levels of the left or right bone colour."""
+    import io
+
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), np.int32)
+    near = [np.abs(rgb - np.array(c)).max(-1) <= 12 for c in (LEFT_RGB, RIGHT_RGB)]
+    return int(sum(n.sum() for n in near))
+
+
+def _wait_generated(page, previous: int, timeout=300_000):  # the first one compiles G
+    page.wait_for_function(f"window.demo.state.seq > {previous} && !window.demo.state.inflight", timeout=timeout)
+
+
+def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_api, demo_url, tmp_path):
+    names = pretrained.read_export(pretrained.SHIPPED_MODEL).meta["style_names"]
+    with playwright_api() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 860}, accept_downloads=True)
+            errors = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(demo_url)
+            page.wait_for_selector("#mode-label .chip")
+            assert page.locator("#mode-label .chip").all_inner_texts() == names
+            page.locator("#auto").uncheck()
+            empty = _bone_pixels(page.locator("#view").screenshot())
+
+            # draw a wave on the floor canvas (300 px = 16 m: 3.2 m across, under 4.4 m long, so
+            # 40 or 48 samples at 1.2 m/s: the same compiled G as test_pretrained's walks)
+            box = page.locator("#floor").bounding_box()
+            x0, y0 = box["x"] + 120, box["y"] + 150
+            page.mouse.move(x0, y0)
+            page.mouse.down()
+            for i in range(1, 31):
+                t = i / 30
+                page.mouse.move(x0 + 60 * t, y0 + 8 * np.sin(2 * np.pi * t), steps=2)
+            page.mouse.up()
+            length = float(page.locator("#path-length").inner_text().split(" m")[0])
+            assert 3.0 < length < 4.4, length
+
+            page.locator("#mode-label .chip", has_text="OldMan").click()
+            seq = page.evaluate("window.demo.state.seq")
+            page.locator("#generate").click()
+            _wait_generated(page, seq)
+            assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
+            frames = page.evaluate("window.demo.frames")
+            assert frames in (40, 48), frames
+            result = page.evaluate("window.demo.state.result")
+            assert [m["title"] for m in result["motions"]] == ["OldMan"]
+            assert len(result["motions"][0]["positions"]) == frames
+
+            # a mix of two styles with the weight sliders
+            page.locator(".tab[data-mode=mix]").click()  # starts as OldMan:1
+            for name, key, presses in (("OldMan", "ArrowLeft", 12), ("Happy", "ArrowRight", 12)):
+                page.locator(f".mixrow[data-name={name}] input").focus()
+                for _ in range(presses):  # 0.05 a step
+                    page.keyboard.press(key)
+            assert page.locator("#style-string").inner_text() == "style: OldMan:0.4,Happy:0.6"
+            seq = page.evaluate("window.demo.state.seq")
+            page.locator("#generate").click()
+            _wait_generated(page, seq)
+            result = page.evaluate("window.demo.state.result")
+            assert [m["title"] for m in result["motions"]] == ["OldMan:0.4,Happy:0.6"]
+
+            # the animation runs: frames are drawn and the clock moves
+            t0, d0 = page.evaluate("[window.demo.state.time, window.demo.drawn]")
+            page.wait_for_timeout(600)
+            t1, d1 = page.evaluate("[window.demo.state.time, window.demo.drawn]")
+            assert d1 > d0 + 5 and t1 != t0
+            shown = _bone_pixels(page.locator("#view").screenshot())
+            assert empty < 20 and shown > 300, (empty, shown)
+
+            # BVH of what is shown, read back by bvh.py
+            with page.expect_download() as dl:
+                page.locator("#dl-bvh").click()
+            path = tmp_path / dl.value.suggested_filename
+            dl.value.save_as(path)
+            motion = bvh.read_bvh(path)
+            assert path.name == "motiongan_OldMan_0.4_Happy_0.6.bvh"
+            assert motion.num_frames == frames
+            meta = pretrained.read_export(pretrained.SHIPPED_MODEL).meta
+            rate = float(meta["fps"]) / meta["config"]["data"]["frame_step"]
+            assert motion.frame_time == pytest.approx(1 / rate)
+
+            # a bad expression: generate.py's message, on the page
+            page.locator(".tab[data-mode=expr]").click()
+            page.locator("#expr").fill("OldMan - Normal + Marchng")
+            try:
+                gen.parse_style("OldMan - Normal + Marchng", names)
+            except gen.StyleError as e:
+                want = str(e)
+            page.wait_for_function("document.querySelector('#expr-check').classList.contains('bad')")
+            assert page.locator("#expr-check").inner_text() == want
+            page.locator("#generate").click()
+            page.wait_for_selector("#error:not([hidden])")
+            assert page.locator("#error").inner_text() == want
+            assert not errors, errors
+        finally:
+            browser.close()
