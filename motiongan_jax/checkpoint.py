@@ -17,7 +17,7 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
-from motiongan_jax.config import ModelConfig
+from motiongan_jax.config import RETIRED_FIELDS, ModelConfig
 
 
 class CheckpointError(RuntimeError):
@@ -96,6 +96,7 @@ def _architecture(key: str, value):
         # a field missing from an older checkpoint's meta predates that option, whose default is
         # what the run was trained with
         value = {**_jsonable(dataclasses.asdict(ModelConfig())), **value}
+        value = {k: v for k, v in value.items() if k not in RETIRED_FIELDS["model"] or v != list(RETIRED_FIELDS["model"][k])}
         value = {k: v for k, v in value.items() if k not in _COMPUTE_ONLY}
     return value
 

@@ -301,9 +301,27 @@ def validate(cfg: Config) -> Config:
     return cfg
 
 
+# Options that no longer exist, with the value that meant "off": a saved config holding that value
+# loads without them; one that used the option is refused (docs/RESULTS.md keeps their record).
+RETIRED_FIELDS = {"model": {"phase_wavelengths_m": ()}}
+
+
+def _drop_retired(section_name: str, values: dict) -> dict:
+    out = dict(values)
+    for name, off in RETIRED_FIELDS.get(section_name, {}).items():
+        if name in out:
+            value = out.pop(name)
+            if (tuple(value) if isinstance(value, list) else value) != off:
+                raise ConfigError(f"{section_name}.{name} = {value!r}: this option no longer exists "
+                                  "(retrain with the current code)")
+    return out
+
+
 def from_dict(d: dict) -> Config:
-    """Inverse of to_dict (lists become tuples again); unknown keys are errors."""
+    """Inverse of to_dict (lists become tuples again); unknown keys are errors, retired options
+    (RETIRED_FIELDS) are dropped when off."""
     def section(cls, values):
+        values = _drop_retired({DataConfig: "data", ModelConfig: "model", TrainConfig: "train"}[cls], values)
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = set(values) - names
         if unknown:

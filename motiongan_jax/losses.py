@@ -128,10 +128,12 @@ CONTACT_SOFTNESS_M = 0.01
 def toe_tracks(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints) -> jax.Array:
     """World toe positions B x T x K x 3 up to one constant per window: the root integrated from the
     origin (curves.integrate) plus the toes' root-relative rows (kept-joint indices >= 1). No
-    gradient reaches the root: planting a foot is the legs' work; pushing the whole body back and
-    forth every sample would do it too, as a jitter that no other term sees."""
+    gradient reaches the root's floor position: planting a foot is the legs' work, and pushing the
+    whole body back and forth every sample would do it too, as a jitter no other term sees. The
+    root's height keeps its gradient: lowering a floating body is the root's work."""
     b, t, r = pose_BxTxR.shape
-    root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), jax.lax.stop_gradient(root_vel_BxTx3))
+    vel = root_vel_BxTx3.at[..., ::2].set(jax.lax.stop_gradient(root_vel_BxTx3[..., ::2]))
+    root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), vel)
     rows_BxTxKx3 = pose_BxTxR.reshape(b, t, r // 3, 3)[:, :, np.asarray(toe_joints) - 1]
     return root_BxTx3[:, :, None, :] + rows_BxTxKx3
 

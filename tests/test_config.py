@@ -72,3 +72,14 @@ def test_invalid_values_name_the_field(assignment, field):
     cfg = load_config(CONFIGS / "tiny.py")
     with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
         validate(override(cfg, [assignment]))
+
+
+def test_saved_configs_with_a_retired_option_off_still_load():
+    from motiongan_jax.config import from_dict, to_dict
+
+    d = to_dict(load_config(CONFIGS / "tiny.py"))
+    d["model"]["phase_wavelengths_m"] = []  # what configs saved before its removal hold
+    assert from_dict(d) == load_config(CONFIGS / "tiny.py")
+    d["model"]["phase_wavelengths_m"] = [1.2]
+    with pytest.raises(ConfigError, match="model.phase_wavelengths_m.*no longer exists"):
+        from_dict(d)

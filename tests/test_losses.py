@@ -143,10 +143,14 @@ def test_foot_losses_by_hand():
     rows = jnp.zeros((1, T, 6))
     assert float(losses.foot_losses(vel, rows, (1, 2), contact, unit)["skate"]) == pytest.approx(
         1 / (1 + math.exp(-2)) * 0.64, rel=1e-5)
-    # but only the legs are asked to plant the feet: no gradient reaches the root
-    g_vel, g_rows = jax.grad(lambda v, r: sum(losses.foot_losses(v, r, (1, 2), contact, unit).values()),
+    # but only the legs are asked to plant the feet: no gradient reaches the root's floor position;
+    # its height keeps one (a hopping root is lowered)
+    g_vel, g_rows = jax.grad(lambda v, r: losses.foot_losses(v, r, (1, 2), contact, unit)["skate"],
                              argnums=(0, 1))(vel, rows)
     assert float(jnp.abs(g_vel).max()) == 0.0 and float(jnp.abs(g_rows).max()) > 0.0
+    hop_vel = jnp.zeros((1, T, 3)).at[:, T // 2, 1].set(0.1)  # the body jumps 0.1 m half way
+    g_vel = jax.grad(lambda v: losses.foot_losses(v, rows, (1, 2), contact, unit)["floor"])(hop_vel)
+    assert float(jnp.abs(g_vel[..., ::2]).max()) == 0.0 and float(jnp.abs(g_vel[..., 1]).max()) > 0.0
 
 
 def test_skate_term_pays_for_lifting_a_moving_toe():
