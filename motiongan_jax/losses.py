@@ -127,15 +127,15 @@ CONTACT_SOFTNESS_M = 0.01
 
 def toe_tracks(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints) -> jax.Array:
     """World toe positions B x T x K x 3 up to one constant per window: the root integrated from the
-    origin (curves.integrate) plus the toes' root-relative rows (kept-joint indices >= 1). No
-    gradient reaches the root's floor position: planting a foot is the legs' work, and pushing the
-    whole body back and forth every sample would do it too, as a jitter no other term sees. The
-    root's height keeps its gradient: lowering a floating body is the root's work."""
+    origin (curves.integrate) plus the toes' root-relative rows (kept-joint indices >= 1)."""
     b, t, r = pose_BxTxR.shape
-    vel = root_vel_BxTx3.at[..., ::2].set(jax.lax.stop_gradient(root_vel_BxTx3[..., ::2]))
-    root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), vel)
+    root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), root_vel_BxTx3)
     rows_BxTxKx3 = pose_BxTxR.reshape(b, t, r // 3, 3)[:, :, np.asarray(toe_joints) - 1]
     return root_BxTx3[:, :, None, :] + rows_BxTxKx3
+
+
+def _above_floor(y_BxTxK: jax.Array) -> jax.Array:
+    return y_BxTxK - jnp.min(y_BxTxK, axis=(1, 2), keepdims=True)
 
 
 def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, contact_height_m: float,
@@ -145,18 +145,19 @@ def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, co
     one drifting up or hopping is.
 
     * floor: mean over samples of (height of the lower toe above the floor)²: a walk keeps a foot
-      down (real walks: millimetres above their lowest toe).
+      down (real walks: millimetres above their lowest toe). Lowering a floating body is the
+      root's work as much as the legs'.
     * skate: mean over steps and toes of c·|Δ(x, z)|², the horizontal step of each toe weighted by
       its soft contact c = sigmoid((contact height − height) / CONTACT_SOFTNESS_M) at the step's
-      end: a toe on the floor stands still, and one that moves must lift (c has a gradient).
+      end: a toe on the floor stands still, and one that moves must lift (c has a gradient). This
+      is the legs' work alone: no gradient reaches the root, which could plant a foot by pushing
+      the whole body back and forth every sample, a jitter no other term sees.
     """
-    toes_BxTxKx3 = toe_tracks(root_vel_BxTx3, pose_BxTxR, toe_joints)
-    h_BxTxK = toes_BxTxKx3[..., 1]
-    h_BxTxK = h_BxTxK - jnp.min(h_BxTxK, axis=(1, 2), keepdims=True)
-    lift_BxT = jnp.min(h_BxTxK, axis=2) / unit
+    floor_BxT = jnp.min(_above_floor(toe_tracks(root_vel_BxTx3, pose_BxTxR, toe_joints)[..., 1]), axis=2) / unit
+    toes_BxTxKx3 = toe_tracks(jax.lax.stop_gradient(root_vel_BxTx3), pose_BxTxR, toe_joints)
     step_BxTm1xK = jnp.sum(jnp.square(jnp.diff(toes_BxTxKx3[..., ::2], axis=1)), axis=-1) / unit**2
-    contact_BxTm1xK = jax.nn.sigmoid((contact_height_m - h_BxTxK[:, 1:]) / CONTACT_SOFTNESS_M)
-    return {"floor": jnp.mean(jnp.square(lift_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
+    contact_BxTm1xK = jax.nn.sigmoid((contact_height_m - _above_floor(toes_BxTxKx3[..., 1])[:, 1:]) / CONTACT_SOFTNESS_M)
+    return {"floor": jnp.mean(jnp.square(floor_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
 
 
 def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax.Array:
