@@ -1,5 +1,6 @@
 """Data-parallel training over 4 CPU devices equals the single-device step on the same batch."""
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -50,8 +51,10 @@ SCRIPT = textwrap.dedent("""
 
 def test_sharded_step_equals_single_device(repo):
     # the backend optimiser is off: it only changes compile time (tiny shapes, 3 steps)
-    env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0",
-           "JAX_PLATFORMS": "cpu", "PATH": "/usr/bin:/bin"}
+    # the caller's XLA_FLAGS come first (an instruction-set cap, say, reaches this process too)
+    flags = (f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4"
+             " --xla_backend_optimization_level=0")
+    env = {"XLA_FLAGS": flags.strip(), "JAX_PLATFORMS": "cpu", "PATH": "/usr/bin:/bin"}
     res = subprocess.run([sys.executable, "-c", SCRIPT.format(repo=str(repo))], capture_output=True, text=True,
                          timeout=600, env=env)
     assert res.returncode == 0, res.stderr[-3000:]
