@@ -187,7 +187,10 @@ def test_g_adversarial_gradient_fools_a_frozen_d(setup):
         params, opt, loss = g_step(params, opt)
         losses.append(float(loss))
     after = float(jnp.mean(adv_logits(params)))
-    assert losses[-1] < 0.5 * losses[0], losses
+    # BCE against 0.9 cannot fall below H(0.9) = 0.325 (half the start is only 6% above it): G
+    # closes 3/4 of the gap (measured, 5 inits x SSE4.2/AVX2: 91-100%; logit gain 1.86-2.43)
+    floor = -(0.9 * np.log(0.9) + 0.1 * np.log(0.1))
+    assert losses[-1] - floor < 0.25 * (losses[0] - floor), losses
     assert after > before + 1.0, (before, after)
 
 
