@@ -373,6 +373,17 @@ def max_step(cfg: DataConfig) -> int:
     return max(1, int(np.floor(cfg.frame_step * max(cfg.fps_factors if cfg.augment_fps else (1.0,)))))
 
 
+def _phase_or_none(clip: Clip) -> tuple[np.ndarray, np.ndarray]:
+    """The clip's gait phase, or an all-invalid one for a skeleton without two feet (it has no gait;
+    the gait options refuse such data in gait_targets, so nothing trains on these zeros)."""
+    try:
+        toes = foot_joints(clip.layout)
+    except ValueError:
+        n = clip.root_Fx3.shape[0]
+        return np.zeros(n, np.float32), np.zeros(n, bool)
+    return clip_gait_phase(clip, clip.layout, toes)
+
+
 def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfig) -> ClipArrays:
     """Concatenate clips and list every window start (spec §2.7: clips longer than frame_nums,
     starts every window_stride frames)."""
@@ -395,7 +406,7 @@ def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfi
         raise DataError(
             f"no clip is longer than data.frame_nums = {cfg.frame_nums} frames (longest: {longest}); "
             "lower frame_nums or frame_step")
-    phases = [clip_gait_phase(c, c.layout, foot_joints(c.layout)) for c in clips]
+    phases = [_phase_or_none(c) for c in clips]
     return ClipArrays(
         root_Nx3=jnp.asarray(np.concatenate([c.root_Fx3 for c in clips])),
         pose_NxR=jnp.asarray(np.concatenate([c.pose_FxR for c in clips])),
