@@ -23,7 +23,7 @@ together, not either alone, raised seed 0 from 0.45 to 0.65 top-1, §8), and `mo
 falls from 43-52% to zero; on three seeds the style scores end level and are higher and steadier
 over the last 5,000 steps, interpolation is more monotonic, z matters less and FMD is lower on
 two seeds, §9).
-10,000 steps take about 26 minutes alone on the 2 cores.
+5,000 steps take about 14 minutes alone on the 2 cores.
 """
 
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig
@@ -46,7 +46,7 @@ def get_config() -> Config:
         model=ModelConfig(top=16, kw=5, w_dim=32, z_dim=32, output_prior="rest_and_curve", g_frame="curve",
                           latent_init="torch_default", d_cond="projection", exact_bones=True, gait_phase=True,
                           root_height=True),
-        train=TrainConfig(batch_size=16, num_steps=10000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
+        train=TrainConfig(batch_size=16, num_steps=5000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
                           w_g_stride=1.0, w_g_floor=5.0, w_g_skate=5.0, w_g_rec=5.0,
                           log_every=50, preview_every=2000, checkpoint_every=1000, keep_checkpoints=10),
     )

@@ -134,10 +134,6 @@ def toe_tracks(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints) -> 
     return root_BxTx3[:, :, None, :] + rows_BxTxKx3
 
 
-def _above_floor(y_BxTxK: jax.Array) -> jax.Array:
-    return y_BxTxK - jnp.min(y_BxTxK, axis=(1, 2), keepdims=True)
-
-
 def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, contact_height_m: float,
                 unit: float = 1.0) -> dict[str, jax.Array]:
     """Annotation-free foot terms on G's output, in `unit`s (squared), heights measured from each
@@ -145,19 +141,19 @@ def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, co
     one drifting up or hopping is.
 
     * floor: mean over samples of (height of the lower toe above the floor)²: a walk keeps a foot
-      down (real walks: millimetres above their lowest toe). Lowering a floating body is the
-      root's work as much as the legs'.
+      down (real walks: millimetres above their lowest toe).
     * skate: mean over steps and toes of c·|Δ(x, z)|², the horizontal step of each toe weighted by
       its soft contact c = sigmoid((contact height − height) / CONTACT_SOFTNESS_M) at the step's
-      end: a toe on the floor stands still, and one that moves must lift (c has a gradient). This
-      is the legs' work alone: no gradient reaches the root, which could plant a foot by pushing
-      the whole body back and forth every sample, a jitter no other term sees.
+      end: a toe on the floor stands still, and one that moves must lift (c has a gradient).
+    Both reach the whole body, root included (docs/RESULTS.md §10 measures stopping the root's).
     """
-    floor_BxT = jnp.min(_above_floor(toe_tracks(root_vel_BxTx3, pose_BxTxR, toe_joints)[..., 1]), axis=2) / unit
-    toes_BxTxKx3 = toe_tracks(jax.lax.stop_gradient(root_vel_BxTx3), pose_BxTxR, toe_joints)
+    toes_BxTxKx3 = toe_tracks(root_vel_BxTx3, pose_BxTxR, toe_joints)
+    h_BxTxK = toes_BxTxKx3[..., 1]
+    h_BxTxK = h_BxTxK - jnp.min(h_BxTxK, axis=(1, 2), keepdims=True)
+    lift_BxT = jnp.min(h_BxTxK, axis=2) / unit
     step_BxTm1xK = jnp.sum(jnp.square(jnp.diff(toes_BxTxKx3[..., ::2], axis=1)), axis=-1) / unit**2
-    contact_BxTm1xK = jax.nn.sigmoid((contact_height_m - _above_floor(toes_BxTxKx3[..., 1])[:, 1:]) / CONTACT_SOFTNESS_M)
-    return {"floor": jnp.mean(jnp.square(floor_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
+    contact_BxTm1xK = jax.nn.sigmoid((contact_height_m - h_BxTxK[:, 1:]) / CONTACT_SOFTNESS_M)
+    return {"floor": jnp.mean(jnp.square(lift_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
 
 
 def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax.Array:
@@ -170,12 +166,7 @@ def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax
 def reconstruction_loss(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR, valid_BxT,
                         unit: float = 1.0) -> jax.Array:
     """Mean absolute difference (in `unit`s) of root velocity and pose rows between G's output and
-    the real windows, over the samples where `valid_BxT`; 0 when none is. Each window's mean root
-    velocity is taken out of both: the real root sways about the smoothed path the input curve
-    follows, so its mean speed along it is a few per cent higher, and the curve loss places the
-    root; what is reconstructed is the sway and bounce."""
-    fake_vel_BxTx3 = fake_vel_BxTx3 - jnp.mean(fake_vel_BxTx3, axis=1, keepdims=True)
-    real_vel_BxTx3 = real_vel_BxTx3 - jnp.mean(real_vel_BxTx3, axis=1, keepdims=True)
+    the real windows, over the samples where `valid_BxT`; 0 when none is."""
     diff_BxT = (jnp.sum(jnp.abs(fake_vel_BxTx3 - real_vel_BxTx3), -1)
                 + jnp.sum(jnp.abs(fake_pose_BxTxR - real_pose_BxTxR), -1)) / (unit * (3 + real_pose_BxTxR.shape[-1]))
     w_BxT = valid_BxT.astype(diff_BxT.dtype)

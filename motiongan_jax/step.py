@@ -344,9 +344,10 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         curve_vel = curves.velocity(curve)
         real_vel = curves.velocity(batch["root_BxTx3"])
         real_pose = batch["pose_BxTxR"]
-        if rec_half:  # the first half: each window's own style and its measured phase
+        if rec_half:  # the first half: each window's own style, z = 0, its measured phase
             rec_B = jnp.arange(curve.shape[0]) < rec_half
             fake_labels = jnp.where(rec_B, batch["label_B"], fake_labels)
+            z = jnp.where(rec_B[:, None], 0.0, z)
 
         # The single G forward; its VJP carries G's loss gradient back after the D update.
         def g_forward(g_params):

@@ -143,14 +143,10 @@ def test_foot_losses_by_hand():
     rows = jnp.zeros((1, T, 6))
     assert float(losses.foot_losses(vel, rows, (1, 2), contact, unit)["skate"]) == pytest.approx(
         1 / (1 + math.exp(-2)) * 0.64, rel=1e-5)
-    # but only the legs are asked to plant the feet: no gradient reaches the root's floor position;
-    # its height keeps one (a hopping root is lowered)
+    # the whole body is asked to plant the feet: the root's velocity gets a gradient too
     g_vel, g_rows = jax.grad(lambda v, r: losses.foot_losses(v, r, (1, 2), contact, unit)["skate"],
                              argnums=(0, 1))(vel, rows)
-    assert float(jnp.abs(g_vel).max()) == 0.0 and float(jnp.abs(g_rows).max()) > 0.0
-    hop_vel = jnp.zeros((1, T, 3)).at[:, T // 2, 1].set(0.1)  # the body jumps 0.1 m half way
-    g_vel = jax.grad(lambda v: losses.foot_losses(v, rows, (1, 2), contact, unit)["floor"])(hop_vel)
-    assert float(jnp.abs(g_vel[..., ::2]).max()) == 0.0 and float(jnp.abs(g_vel[..., 1]).max()) > 0.0
+    assert float(jnp.abs(g_vel).max()) > 0.0 and float(jnp.abs(g_rows).max()) > 0.0
 
 
 def test_skate_term_pays_for_lifting_a_moving_toe():
@@ -182,8 +178,3 @@ def test_reconstruction_loss_by_hand_and_mask():
     # samples without a measured phase do not count
     assert float(losses.reconstruction_loss(vel, pose, vel, real_pose, valid.at[0, 1].set(False), 0.3)) == 0.0
     assert float(losses.reconstruction_loss(vel, pose, vel, real_pose, jnp.zeros((B, T), bool), 0.3)) == 0.0
-    # a constant root velocity offset is the curve loss's business; a fluctuation is reconstructed
-    assert float(losses.reconstruction_loss(vel + 0.2, pose, vel, pose, valid, 0.3)) == pytest.approx(0.0, abs=1e-7)
-    bounce = vel.at[:, ::2, 1].set(0.03).at[:, 1::2, 1].set(-0.03)
-    assert float(losses.reconstruction_loss(bounce, pose, vel, pose, valid, 0.3)) == pytest.approx(0.03 / 0.3 / (3 + R),
-                                                                                                    rel=1e-5)
