@@ -1,7 +1,7 @@
 """The small variant of configs/bandai.py: the cpu config's model and training on the Bandai Namco data.
 
 Same data settings as bandai.py but T 32 (a 2.1 s window at 15 Hz), and every setting of
-configs/cpu.py (docs/RESULTS.md); trains on 2 CPU cores in about half an hour. Pass --data
+configs/cpu.py (docs/RESULTS.md); trains 5,000 steps on 2 CPU cores in about 15 minutes. Pass --data
 ../shared/data/bandai/dataset-2 (or dataset-1, or their parent for both).
 """
 
