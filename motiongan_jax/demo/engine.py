@@ -154,14 +154,6 @@ class Result:
     batch_bucket: int
 
 
-def _extend_straight(curve_Tx3: np.ndarray, n: int) -> np.ndarray:
-    """The curve with n more samples straight on along its last direction at its last spacing."""
-    if n == 0:
-        return curve_Tx3
-    d = curve_Tx3[-1] - curve_Tx3[-2]
-    return np.concatenate([curve_Tx3, curve_Tx3[-1] + d * np.arange(1, n + 1, dtype=np.float32)[:, None]])
-
-
 def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")[:60] or "walk"
 
@@ -242,7 +234,7 @@ class Engine:
         B = len(w)
         Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
         w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
-        full = gen_lib.generate_motion(self.state, self.layout, _extend_straight(curve_T, Tb - T), w_pad)
+        full = gen_lib.generate_motion(self.state, self.layout, gen_lib.extend_straight(curve_T, Tb - T), w_pad)
         raw = full.positions[:B, :T].copy()
         raw[..., 1] -= full.floor_shift_m[:B, None, None]
         shift = gen_lib.floor_shift(raw)
