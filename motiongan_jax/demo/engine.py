@@ -32,7 +32,8 @@ import numpy as np
 from motiongan_jax import curves
 from motiongan_jax import generate as gen_lib
 
-# Limits the server enforces on every request (each breach is a 400 naming it)
+# Limits the server enforces on every request (each breach is a 400 naming it): an interactive
+# page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
 MAX_POINTS = 20_000  # floor points of a drawn path
 MAX_PATH_M = 60.0  # metres of path
 MAX_STYLES = 6  # panels side by side (one style each)
