@@ -16,12 +16,16 @@ or JSON file of x,z points in metres, or a BVH file (its pelvis path, at its own
 --style: a name, a mix "A:0.3,B:0.7" (weights normalised to sum 1), an expression "A - B + C",
 a .npy/.txt file holding a raw w vector, or "random" (from --seed). --z zero (default: w =
 LT(0, label) like the reference's inference), seed (one z from --seed) or K (K samples, K outputs).
---out by suffix: .bvh (metres, Y up; --bvh-units cm for centimetres), .npz (joint positions in
-metres and metadata), .gif, .mp4 (needs ffmpeg or imageio-ffmpeg), .png (pose strips). Several
-motions: .bvh/.npz get one file each (OUT_0.bvh, ...), .gif/.mp4/.png show them side by side.
+--out by suffix: .bvh (metres, Y up; --bvh-units cm for centimetres; --bvh-hierarchy source,
+the training skeleton's joints, or exact, every bone direction exact through zero-length branch
+joints), .npz (joint positions in metres and metadata), .gif, .mp4 (needs ffmpeg or
+imageio-ffmpeg), .png (pose strips). Several motions: .bvh/.npz get one file each (OUT_0.bvh,
+...), .gif/.mp4/.png show them side by side. The whole curve is walked (up to the limits in
+motiongan_jax/generate.py: 10 km, 36,000 samples); long ones go through G in chunks, with a
+progress line on stderr when that takes more than a few seconds.
 --figure styles|interp|arith: the paper's Fig. 4 (--style "A,B,C" or all styles), Fig. 6
 (--style "A,B": α = 0, 1/4, 1/2, 3/4, 1) and Fig. 7 (--style "A - B + C": operands and result).
-Notes (the curve's sampling, trimming to a multiple of 8) go to stderr, written paths to stdout.
+Notes (the curve's sampling, the BVH's best-fit error) go to stderr, written paths to stdout.
 Errors: a message on stderr, exit status 2, and no output file.
 """
 
@@ -34,6 +38,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+class Progress:
+    """`progress(done, total)` for generate_motion: a line on `stream` per G call, once the
+    generation has run for `delay` seconds (short ones stay quiet)."""
+
+    def __init__(self, stream=sys.stderr, delay: float = 2.0, clock=None):
+        import time
+
+        self.stream, self.delay, self.clock = stream, delay, clock or time.monotonic
+        self.t0 = self.clock()
+
+    def __call__(self, done: int, total: int) -> None:
+        elapsed = self.clock() - self.t0
+        if elapsed < self.delay:
+            return
+        eta = elapsed / done * (total - done)
+        bar = "#" * (20 * done // total)
+        print(f"generating [{bar:<20}] {done}/{total} G calls, {elapsed:.0f} s, about {eta:.0f} s left",
+              file=self.stream, flush=True)
 
 
 def main(argv=None) -> int:
@@ -57,6 +81,9 @@ def main(argv=None) -> int:
     ap.add_argument("--z", default="zero", help="zero (default), seed, or a number of samples K")
     ap.add_argument("--figure", choices=("styles", "interp", "arith"), default=None)
     ap.add_argument("--bvh-units", choices=("m", "cm"), default="m")
+    ap.add_argument("--bvh-hierarchy", choices=("source", "exact"), default="source",
+                    help="source (default): the training skeleton's joints, bones leaving a joint with several "
+                         "children best-fit; exact: every bone direction exact, zero-length branch joints added")
     args = ap.parse_args(argv)
 
     from motiongan_jax import checkpoint, curves, generate as gen_lib, pretrained
@@ -87,13 +114,15 @@ def main(argv=None) -> int:
         rate = gen_lib.sample_rate(meta, cfg)
         curve = gen_lib.load_curve(args.curve, length=args.length, scale=args.scale,
                                    control_seconds=cfg.data.control_point_interval / float(meta["fps"]))
-        curve_T = gen_lib.prepare_curve(curve, rate, args.speed, log=_log)
+        curve_M = gen_lib.prepare_curve(curve, rate, args.speed, log=_log)
+        count = len(panels) * len(z)
+        gen_lib.check_output_size(args.out, len(curve_M), count)  # before any work
         w = gen_lib.style_codes(state, [s for _, s in panels], names, z)
         titles = [t if len(z) == 1 else f"{t} z{k}" for t, _ in panels for k in range(len(z))]
         zs = [z[k] for _ in panels for k in range(len(z))]
-        generated = gen_lib.generate_motion(state, layout, curve_T, w)
-        paths = gen_lib.write_outputs(args.out, generated, titles, layout, rate,
-                                      bvh_units=args.bvh_units, z_per_motion=zs, log=_log)
+        generated = gen_lib.generate_motion(state, layout, curve_M, w, progress=Progress())
+        paths = gen_lib.write_outputs(args.out, generated, titles, layout, rate, bvh_units=args.bvh_units,
+                                      bvh_hierarchy=args.bvh_hierarchy, z_per_motion=zs, log=_log)
     except errors as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -43,7 +43,7 @@ def main(argv=None) -> int:
             sets.append(f"train.seed={args.seed}")
         if args.steps is not None:
             sets.append(f"train.num_steps={args.steps}")
-        cfg = validate(override(cfg, sets))
+        cfg = validate(override(cfg, sets), need_data=not args.dry_run)
         if args.dry_run:
             from motiongan_jax.summary import describe
 

@@ -243,7 +243,9 @@ def override(cfg: Config, assignments: list[str]) -> Config:
     return cfg
 
 
-def validate(cfg: Config) -> Config:
+def validate(cfg: Config, *, need_data: bool = True) -> Config:
+    """`cfg` if every field is valid, else ConfigError naming the field. need_data=False accepts
+    a config without the data directory its label rule needs (a dry run describes the model)."""
     d, m, t = cfg.data, cfg.model, cfg.train
 
     def need(ok: bool, field: str, msg: str) -> None:
@@ -264,7 +266,7 @@ def validate(cfg: Config) -> Config:
     need(d.units_to_m is None or d.units_to_m > 0, "data.units_to_m", "must be positive")
     need(d.val_modulus == 0 or (d.val_modulus >= 2 and 0 <= d.val_remainder < d.val_modulus),
          "data.val_modulus", "need 0 (no split) or modulus >= 2 with 0 <= remainder < modulus")
-    need(d.data_dir is not None or d.label_rule == "synthetic", "data.data_dir",
+    need(d.data_dir is not None or d.label_rule == "synthetic" or not need_data, "data.data_dir",
          f"label rule {d.label_rule!r} needs a data directory (--data DIR); only 'synthetic' has a default")
     need(len(set(d.styles)) == len(d.styles), "data.styles", "duplicate style names")
     need(m.top >= 1 and m.top % 1 == 0, "model.top", "must be a positive integer")

@@ -1,24 +1,33 @@
 """Joint positions -> BVH joint rotations ("inverse kinematics" by aligning bone directions).
 
 The generator outputs joint *positions*; a BVH file needs a fixed skeleton (OFFSETs) and per-frame
-joint rotations. `positions_to_motion` finds rotations whose forward kinematics put every bone
-along the generated bone direction, with the skeleton's own bone lengths:
+joint rotations. `positions_to_motion` finds rotations whose forward kinematics put the bones
+along the generated bone directions, with the skeleton's own bone lengths: a generated pose whose
+bones are slightly too long or short is "made rigid" along each bone direction, outward from the
+root; the root position is the generated one.
 
-- bone directions are exact (to float64 rounding, ~1e-12 rad before the text is written),
-- bone lengths are the export skeleton's (the layout's rest offsets), so a generated pose whose
-  bones are slightly too long or short is "made rigid" along each bone direction, outward from
-  the root; the root position is the generated one.
+Two export skeletons (`HIERARCHIES`, `export_skeleton`); OFFSETs are the layout's rest offsets
+(the rest pose of the training skeleton; identity rotations there) in both:
 
-Export skeleton (`export_skeleton`). The kept joints of the row layout, OFFSETs = the layout's
-rest offsets (the rest pose of the training skeleton; identity rotations there). Leaves (End
-Sites in the source) become BVH End Sites. One joint rotation cannot point several child bones
-along arbitrary directions (a generated pose is not a rigid copy of the rest pose), so every
-child of a joint with several children hangs from its own zero-length *branch joint* (OFFSET
-0 0 0, three rotation channels), exactly like CMU's zero-length LHipJoint, LowerBack,
-LeftShoulder, LThumb ... A branch joint is named after its child; for a leaf "X_EndSite" it is
-named "X", so that bvh.read_bvh (which calls an End Site "<parent>_EndSite") gives the leaf its
-original name back. Reading the file back and applying representation.layout_from_skeleton drops
-the zero-length branch joints again and recovers the layout's joints in the same order.
+- "source" (default): the hierarchy of the skeleton the model was trained on, joint for joint
+  (the layout's kept joints under their own parents; see "Leaves" for the End Sites). One
+  rotation cannot point several child bones along arbitrary directions (a generated pose is not
+  a rigid copy of the rest pose), so at a joint with several children (pelvis, chest, hands)
+  the bones to its children are best fits, not exact (`bone_errors` measures them; README,
+  "Generating walks", gives a trained model's figures); every other bone direction is exact.
+- "exact": every child of a joint with several children hangs from its own zero-length *branch
+  joint* (OFFSET 0 0 0, three rotation channels), like CMU's zero-length LHipJoint, LowerBack,
+  LeftShoulder, ..., so every bone direction is exact (to float64 rounding, ~1e-12 rad before
+  the text is written) at the price of extra joints the training skeleton does not have (named
+  "<child>_branch"). Reading the file back and applying representation.layout_from_skeleton
+  drops the zero-length joints again and recovers the layout's joints in the same order.
+
+Leaves. A layout leaf named "<P>_EndSite" whose export parent is P is written as P's End Site
+(bvh.read_bvh calls an End Site "<parent>_EndSite", so it reads back under its own name). One
+named "<X>_EndSite" under another parent (CMU's thumbs: the source's zero-length LThumb was
+dropped) gets the zero-length joint X back, the source's own, with the End Site under it; one
+with another name (Bandai's Head, whose End Site has zero length) is written as a joint of that
+name with a zero-length End Site, as in its source file. Both read back to the layout.
 
 How the free rotation (twist) is chosen:
 - a joint with one child: its local rotation is the *minimal* (swing-only) rotation taking the
@@ -26,13 +35,13 @@ How the free rotation (twist) is chosen:
   twist about the bone relative to its parent (so forearm twist is inherited from the upper
   arm; nothing spins). If the posed direction is opposite to the rest one (a 180 degree swing,
   whose axis is undefined) a fixed axis perpendicular to the bone is used.
-- a joint with several children (pelvis, chest, hand): its world rotation is the best-fit
-  rotation (Kabsch/SVD, unit directions) of the rest child directions onto the posed ones, so
-  the twist follows the plane of the children (hips, shoulders); then each branch joint adds the
-  minimal rotation that makes its child's direction exact. For a pose that is a rigid rotation of
-  the rest pose (e.g. FK of this skeleton) the branch rotations are the identity. If the rest
-  child directions are collinear (no plane) the joint falls back to the single-child rule on its
-  first child.
+- a joint with several children: its world rotation is the best-fit rotation (Kabsch/SVD, unit
+  directions) of the rest child directions onto the posed ones, so the twist follows the plane
+  of the children (hips, shoulders); then a zero-length joint between it and a child (a branch
+  joint, or a leaf's restored joint) adds the minimal rotation that makes that child's direction
+  exact. For a pose that is a rigid rotation of the rest pose (e.g. FK of this skeleton) the
+  best fit is exact and those rotations are the identity. If the rest child directions are
+  collinear (no plane) the joint falls back to the single-child rule on its first child.
 - a bone of (near) zero posed length has no direction: it keeps its rest direction relative to
   the parent (identity local rotation).
 
@@ -161,6 +170,14 @@ class ExportSkeleton:
     skeleton: bvh.Skeleton  # the BVH hierarchy, OFFSETs in file units
     kept_index: tuple[int, ...]  # layout joint -> index in the export skeleton
     units_per_m: float
+    # layout joint -> the zero-length export joint between it and its layout parent (a branch
+    # joint or a leaf's restored joint), -1 for none
+    helper_index: tuple[int, ...] = ()
+    hierarchy: str = "source"
+
+
+HIERARCHIES = ("source", "exact")
+_END = "_EndSite"
 
 
 def _children(parents) -> list[list[int]]:
@@ -189,11 +206,15 @@ def _check_layout(joint_names, parents, rest_offsets_m):
     return parents, rest
 
 
-def export_skeleton(joint_names, parents, rest_offsets_m, units_per_m: float = 1.0) -> ExportSkeleton:
+def export_skeleton(joint_names, parents, rest_offsets_m, units_per_m: float = 1.0,
+                    hierarchy: str = "source") -> ExportSkeleton:
     """The BVH skeleton of a row layout (see the module doc), OFFSETs in file units."""
+    if hierarchy not in HIERARCHIES:
+        raise IKError(f"hierarchy must be one of {', '.join(HIERARCHIES)}, got {hierarchy!r}")
     parents, rest = _check_layout(joint_names, parents, rest_offsets_m)
     children = _children(parents)
-    names, par, offs, chans, kept = [], [], [], [], [-1] * len(parents)
+    names, par, offs, chans = [], [], [], []
+    kept, helper = [-1] * len(parents), [-1] * len(parents)
     used = set(joint_names)
 
     def add(name, parent, offset, channels):
@@ -207,9 +228,7 @@ def export_skeleton(joint_names, parents, rest_offsets_m, units_per_m: float = 1
         order = _ORDER_BY_MIDDLE[int(np.argmax(np.abs(direction)))]
         return tuple(f"{c}rotation" for c in order)
 
-    def branch_name(child: str) -> str:
-        base = child[: -len("_EndSite")] if child.endswith("_EndSite") else f"{child}_branch"
-        name = base
+    def fresh(name: str) -> str:
         while name in used:
             name += "_"
         used.add(name)
@@ -217,27 +236,34 @@ def export_skeleton(joint_names, parents, rest_offsets_m, units_per_m: float = 1
 
     def visit(j: int, export_parent: int, offset) -> None:
         kids = children[j]
+        name = joint_names[j]
         if j == 0:
-            channels = ROOT_CHANNELS + tuple(f"{c}rotation" for c in ROOT_ORDER)
-        elif not kids:
-            channels = ()
-        elif len(kids) == 1:
-            channels = order_for(rest[kids[0]])
-        else:
-            channels = tuple(f"{c}rotation" for c in "ZYX")
-        e = add(joint_names[j], export_parent, offset, channels)
-        kept[j] = e
+            kept[j] = add(name, -1, offset, ROOT_CHANNELS + tuple(f"{c}rotation" for c in ROOT_ORDER))
+        elif kids:
+            channels = order_for(rest[kids[0]]) if len(kids) == 1 else tuple(f"{c}rotation" for c in "ZYX")
+            kept[j] = add(name, export_parent, offset, channels)
+        elif name == names[export_parent] + _END:  # reads back as "<parent>_EndSite"
+            kept[j] = add(name, export_parent, offset, ())
+        elif name.endswith(_END):  # the source's zero-length joint X of "X_EndSite", then the End Site
+            h = add(fresh(name[: -len(_END)]), export_parent, np.zeros(3), order_for(rest[j]))
+            helper[j] = h
+            kept[j] = add(name, h, offset, ())
+        else:  # a joint whose End Site had zero length in the source
+            kept[j] = add(name, export_parent, offset, order_for(rest[j]))
+            add(name + _END, kept[j], np.zeros(3), ())
         for c in kids:
-            if len(kids) > 1:
-                b = add(branch_name(joint_names[c]), e, np.zeros(3), order_for(rest[c]))
-                visit(c, b, rest[c] * units_per_m)
+            if hierarchy == "exact" and len(kids) > 1:
+                child = joint_names[c]
+                base = child[: -len(_END)] if child.endswith(_END) else f"{child}_branch"
+                helper[c] = add(fresh(base), kept[j], np.zeros(3), order_for(rest[c]))
+                visit(c, helper[c], rest[c] * units_per_m)
             else:
-                visit(c, e, rest[c] * units_per_m)
+                visit(c, kept[j], rest[c] * units_per_m)
 
     visit(0, -1, np.zeros(3))
     sk = bvh.Skeleton(names=tuple(names), parents=tuple(par), offsets=np.asarray(offs, np.float64),
                       channels=tuple(chans))
-    return ExportSkeleton(sk, tuple(kept), float(units_per_m))
+    return ExportSkeleton(sk, tuple(kept), float(units_per_m), tuple(helper), hierarchy)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -245,13 +271,14 @@ def export_skeleton(joint_names, parents, rest_offsets_m, units_per_m: float = 1
 # ---------------------------------------------------------------------------------------------
 
 
-def solve_rotations(positions_m, joint_names, parents, rest_offsets_m, units_per_m: float = 1.0):
+def solve_rotations(positions_m, joint_names, parents, rest_offsets_m, units_per_m: float = 1.0,
+                    hierarchy: str = "source"):
     """(export skeleton, local rotations (F, Je, 3, 3), root positions (F, 3) in file units).
 
     positions_m: (F, J, 3) world positions of the layout's joints in metres (Y up).
     Rotations are given for every export joint (identity for End Sites).
     """
-    ex = export_skeleton(joint_names, parents, rest_offsets_m, units_per_m)
+    ex = export_skeleton(joint_names, parents, rest_offsets_m, units_per_m, hierarchy)
     parents, rest = _check_layout(joint_names, parents, rest_offsets_m)
     pos = np.asarray(positions_m, np.float64)
     J = len(parents)
@@ -294,38 +321,37 @@ def solve_rotations(positions_m, joint_names, parents, rest_offsets_m, units_per
         targets = pos[:, kids] - pos[:, j:j + 1]  # (F, K, 3)
         if len(kids) == 1:
             swing(e, targets[:, 0], rest_dir[kids[0]])
-            continue
-        rest_k = rest_dir[kids]
-        planar = np.linalg.svd(rest_k, compute_uv=False)[1] > _COLLINEAR
-        if planar:
-            d, n = _unit(targets)
-            # children without a direction do not vote (their rest direction is kept below)
-            d = np.where((n > _EPS_LEN)[..., None], d, 0.0)
-            G = kabsch(rest_k, d)
-            Gp = parent_world(e)
-            local[:, e] = np.swapaxes(Gp, -1, -2) @ G
-            world[e] = G
         else:
-            swing(e, targets[:, 0], rest_k[0])
+            rest_k = rest_dir[kids]
+            if np.linalg.svd(rest_k, compute_uv=False)[1] > _COLLINEAR:  # the children span a plane
+                d, n = _unit(targets)
+                # children without a direction do not vote (their rest direction is kept below)
+                d = np.where((n > _EPS_LEN)[..., None], d, 0.0)
+                G = kabsch(rest_k, d)
+                local[:, e] = np.swapaxes(parent_world(e), -1, -2) @ G
+                world[e] = G
+            else:
+                swing(e, targets[:, 0], rest_k[0])
         for k, c in enumerate(kids):
-            b = sk.parents[ex.kept_index[c]]  # the branch joint of child c
-            swing(b, targets[:, k], rest_dir[c])
+            if ex.helper_index[c] >= 0:  # the zero-length joint above c makes c's direction exact
+                swing(ex.helper_index[c], targets[:, k], rest_dir[c])
     root = pos[:, 0] * units_per_m
     return ex, local, root
 
 
 def positions_to_motion(positions_m, joint_names, parents, rest_offsets_m, frame_time: float, *,
-                        units_per_m: float = 1.0, source: str = "<generated>") -> bvh.Motion:
+                        units_per_m: float = 1.0, hierarchy: str = "source",
+                        source: str = "<generated>") -> bvh.Motion:
     """A BVH Motion on the export skeleton whose FK follows `positions_m` (see the module doc).
 
     positions_m: (F, J, 3) metres, Y up; frame_time: seconds per frame; units_per_m: file units
-    per metre (1 for metres, 100 for centimetres).
+    per metre (1 for metres, 100 for centimetres); hierarchy: one of HIERARCHIES.
     """
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise IKError(f"frame time must be > 0 seconds, got {frame_time}")
     if not (np.isfinite(units_per_m) and units_per_m > 0):
         raise IKError(f"units_per_m must be > 0, got {units_per_m}")
-    ex, local, root = solve_rotations(positions_m, joint_names, parents, rest_offsets_m, units_per_m)
+    ex, local, root = solve_rotations(positions_m, joint_names, parents, rest_offsets_m, units_per_m, hierarchy)
     sk = ex.skeleton
     cols = []
     for e, ch in enumerate(sk.channels):
@@ -352,3 +378,13 @@ def bone_directions(positions, parents) -> np.ndarray:
     pos = np.asarray(positions, np.float64)
     p = np.asarray(parents[1:])
     return _unit(pos[..., 1:, :] - pos[..., p, :])[0]
+
+
+def bone_errors(positions_m, exported_m, parents) -> np.ndarray:
+    """Angles (radians, (F, J-1)) between the generated bone directions and the exported ones
+    (both (F, J, 3) layout positions); 0 where a generated bone has no direction."""
+    a, b = bone_directions(positions_m, parents), bone_directions(exported_m, parents)
+    angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+    pos = np.asarray(positions_m, np.float64)
+    n = np.linalg.norm(pos[..., 1:, :] - pos[..., list(parents[1:]), :], axis=-1)
+    return np.where(n > _EPS_LEN, angle, 0.0)

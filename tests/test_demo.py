@@ -195,6 +195,24 @@ def test_non_json_bodies_non_finite_numbers_and_oversized_bodies(client):
     assert _post(client, "/api/generate", {"points": _line(32), "styles": ["Happy"]}).status_code == 200
 
 
+def test_the_demo_limits_lie_inside_generates_which_apply_too(client, monkeypatch):
+    """generate.py's limits are the one definition every entry point applies; the demo's own are
+    an interactive page's and lie inside them. A path within the demo's but beyond a (lowered)
+    generate limit is a 400 with generate's message, before G runs."""
+    assert E.MAX_PATH_M <= gen.MAX_CURVE_LENGTH_M and E.MAX_POINTS <= gen.MAX_CURVE_POINTS
+    assert E.MAX_MOTIONS * E.SAMPLE_BUCKETS[-1] <= min(gen.MAX_TOTAL_SAMPLES, gen.BATCH_SAMPLES)  # one G call
+    assert E.MAX_MOTIONS * E.GIF_MAX_FRAMES <= gen.MAX_GIF_FRAMES
+
+    def no_g(*args):
+        raise AssertionError("G ran")
+
+    monkeypatch.setattr(gen, "_apply_g", no_g)
+    monkeypatch.setattr(gen, "MAX_CURVE_LENGTH_M", 2.0)
+    r = _post(client, "/api/generate", {"points": _line(32), "styles": ["Happy"]})  # 2.5 m
+    assert r.status_code == 400, r.get_json()
+    assert re.search(r"3 m is longer than the limit of 2 m \(generate.MAX_CURVE_LENGTH_M\)", r.get_json()["error"])
+
+
 def test_style_check_and_shapes(client, engine):
     r = _post(client, "/api/style", {"style": "oldman - Normal + 0.5*Marching"})
     assert r.get_json() == {"kind": "expr", "text": "OldMan - Normal + 0.5*Marching",

@@ -133,22 +133,54 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
 # curves
 
 
-def test_prepare_curve_spacing_trimming_and_extension():
+def test_prepare_curve_spacing_keeps_every_sample():
     notes = []
     c = gen.prepare_curve(_line(), 15.0, SPEED, log=notes.append)
     chex.assert_shape(c, (T_LONG, 3))
     assert c.dtype == np.float32 and not np.any(c[:, 1])
     np.testing.assert_allclose(np.linalg.norm(np.diff(c, axis=0), axis=1), SPEED / 15, rtol=1e-5)
-    assert "96 samples" in notes[0] and "trimmed" not in notes[0]
+    assert "96 samples" in notes[0] and "walked in full" not in notes[0]
+    # 101 samples: all kept (the whole curve is walked); G will run on 104
     c = gen.prepare_curve(_line(T_LONG + 5), 15.0, SPEED, log=notes.append)
-    assert len(c) == T_LONG and "trimmed to 96" in notes[-1] and "5 samples" in notes[-1]
+    assert len(c) == T_LONG + 5 and "101 samples" in notes[-1] and "cropped back to its 101 samples" in notes[-1]
+    assert gen.padded_length(101) == 104 and gen.padded_length(96) == 96 and gen.padded_length(3) == gen.MIN_T
     c = gen.prepare_curve(gen.Curve(np.array([[0.0, 0.0], [0.5, 0.0]]), "short"), 15.0, SPEED, log=notes.append)
-    assert len(c) == gen.MIN_T and "extended" in notes[-1]
+    assert len(c) == 7 and f"at least {gen.MIN_T}" in notes[-1]  # 0.5 m at 8 cm: 0, 0.08, ..., 0.48
     np.testing.assert_allclose(np.diff(c[:, 0]), SPEED / 15, rtol=1e-5)
     c = gen.prepare_curve(gen.load_curve("circle", scale=1.0), 15.0, 0.6)  # speed sets the spacing
     np.testing.assert_allclose(np.linalg.norm(np.diff(c, axis=0), axis=1), 0.04, rtol=1e-3)
     with pytest.raises(gen.GenerateError, match="speed must be"):
         gen.prepare_curve(_line(), 15.0, -1.0)
+
+
+def test_curve_limits_refuse_before_allocating(tmp_path, monkeypatch):
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(gen.GenerateError, match=r"10,000,000 m is longer than the limit of 10,000 m"):
+        gen.load_curve("line", length=1e7)
+    with pytest.raises(gen.GenerateError, match="longer than the limit"):
+        gen.load_curve("circle", scale=1e9)
+    (tmp_path / "far.csv").write_text("0,0\n1e9,0\n")  # 93 GiB of samples, once
+    with pytest.raises(gen.GenerateError, match=r"far.csv: 1,000,000,000 m is longer than the limit"):
+        gen.load_curve(str(tmp_path / "far.csv"))
+    calls = []
+    monkeypatch.setattr(curves, "resample_polyline", lambda *a, **k: calls.append(a))
+    # 5 km is allowed, but at 8 cm per sample it is 62,501 samples, more than G may walk
+    with pytest.raises(gen.GenerateError, match=r"62,501 samples at 0.08 m .* limit of 36,000 \(40 minutes"):
+        gen.prepare_curve(np.array([[0.0, 0.0], [5000.0, 0.0]]), 15.0, SPEED)
+    with pytest.raises(gen.GenerateError, match="longer than the limit"):  # an array, the demo's way in
+        gen.prepare_curve(np.array([[0.0, 0.0], [0.0, 2e4]]), 15.0, SPEED)
+    with pytest.raises(gen.GenerateError, match=r"250,001 points are more than the limit of 250,000"):
+        gen.prepare_curve(np.stack([np.arange(250_001) * 1e-3, np.zeros(250_001)], -1), 15.0, SPEED)
+    assert not calls  # refused before resampling
+    monkeypatch.setattr(gen, "MAX_CURVE_FILE_BYTES", 100)
+    (tmp_path / "big.csv").write_text("".join(f"{i},0\n" for i in range(50)))
+    with pytest.raises(gen.GenerateError, match=r"big.csv: .* larger than the limit"):
+        gen.load_curve(str(tmp_path / "big.csv"))
+    assert time.perf_counter() - t0 < 5.0
+    # the bounds themselves: a 10-minute walk fits, at the default speed and the shipped 15 Hz
+    assert 10 * 60 * 15 < gen.MAX_CURVE_SAMPLES and 10 * 60 * gen.DEFAULT_SPEED_M_PER_S < gen.MAX_CURVE_LENGTH_M
 
 
 def test_bad_curves_are_clear_errors(tmp_path):
@@ -198,8 +230,224 @@ def test_a_curve_six_windows_long_walks_on_the_floor(run):
     # the root is curves.integrate from the curve start (y = 0), lifted by the floor shift
     root = np.asarray(curves.integrate(curve[:1] * [1, 0, 1], out.root_velocity.astype(np.float32)))[0]
     np.testing.assert_allclose(out.positions[0, :, 0] - [0, out.floor_shift_m[0], 0], root, rtol=1e-5, atol=1e-4)
-    with pytest.raises(gen.GenerateError, match="multiple of 8"):
-        gen.generate_motion(state, layout, curve[:90], w)
+    # more motions x samples than one call may hold: refused before G runs
+    with pytest.raises(gen.GenerateError, match=r"9 motions x 36,000 samples = 324,000 are more than the limit"):
+        gen.generate_motion(state, layout, np.zeros((36_000, 3)), np.repeat(w, 9, 0))
+    with pytest.raises(gen.GenerateError, match=r"36,001 samples are more than the limit of 36,000"):
+        gen.generate_motion(state, layout, np.zeros((36_001, 3)), w)
+
+
+def _arc_then_straight(M, turn_samples, spacing=SPEED / 15, rate=0.03):
+    """(M, 3) samples at equal spacing: heading turns by `rate` rad per sample for
+    `turn_samples` samples, then stays: from there on every step is the same vector."""
+    heading = rate * np.minimum(np.arange(M), turn_samples)
+    steps = spacing * np.stack([np.cos(heading), np.zeros(M), np.sin(heading)], -1)
+    steps[0] = 0.0
+    return np.cumsum(steps, axis=0).astype(np.float32)
+
+
+def test_the_whole_curve_is_walked_and_the_motion_cropped_to_it(run):
+    """A 90-sample curve: G runs on 96 (the curve extended straight), the motion has 90 frames.
+    The curve turns, then goes straight from sample 80, so its straight extension is the
+    96-sample curve itself: the motion is that curve's first 90 frames, up to the float32
+    rounding of the extended points (a turning input: on a straight one G's instance norms
+    would normalise rounding noise)."""
+    state, meta, cfg, layout = run
+    full = _arc_then_straight(T_LONG, 80)
+    w = gen.style_codes(state, [gen.parse_style("Sad", meta["style_names"])], meta["style_names"])
+    ref = gen.generate_motion(state, layout, full, w)
+    out = gen.generate_motion(state, layout, full[:90], w)
+    chex.assert_shape(out.positions, (1, 90, layout.num_joints, 3))
+    chex.assert_shape([out.root_velocity, out.curve], [(1, 90, 3), (90, 3)])
+    # measured 1.5e-4 of the largest value; padding by standing still instead differs by 1.7
+    scale = np.abs(ref.pose).max()
+    np.testing.assert_allclose(out.pose, ref.pose[:, :90], atol=2e-3 * scale)
+    np.testing.assert_allclose(out.root_velocity, ref.root_velocity[:, :90], atol=2e-3 * scale)
+    # the feet go on the floor over the clip's own frames
+    lowest = out.positions[0, :, :, 1].min(axis=-1)
+    assert np.percentile(lowest, gen.FLOOR_PERCENTILE) == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(out.positions[0, 0, 0, [0, 2]], full[0, [0, 2]], atol=1e-6)
+    # a very short curve: 5 samples, G on MIN_T, 5 frames back
+    assert gen.generate_motion(state, layout, full[:5], w).positions.shape[1] == 5
+    with pytest.raises(gen.GenerateError, match=r"M >= 2"):
+        gen.generate_motion(state, layout, full[:1], w)
+
+
+def test_chunk_starts_and_weights():
+    assert gen.chunk_starts(2048, 4096) == [0]
+    assert gen.chunk_starts(2048, 1024) == [0, 512, 1024]  # (2048 - 1024) / (1024 - 512) + 1 chunks
+    for T in (1032, 1536, 2056, 5000 // 8 * 8, 9000, 36_000):
+        starts = gen.chunk_starts(T, 1024)
+        assert starts[0] == 0 and starts[-1] == T - 1024 and all(s % 8 == 0 for s in starts)
+        assert all(b - a <= 1024 - gen.CHUNK_OVERLAP for a, b in zip(starts, starts[1:])), T
+        weights = gen.chunk_weights(starts, 1024)
+        total = np.zeros(T)
+        for s, w in zip(starts, weights):
+            total[s:s + 1024] += w
+        assert total.min() > 0.1, T  # every sample is covered
+        # no sample within CHUNK_MARGIN of a chunk end that meets another chunk is used
+        for i, w in enumerate(weights):
+            if i > 0:
+                assert not w[:gen.CHUNK_MARGIN].any()
+                assert w[gen.CHUNK_MARGIN + gen.CHUNK_FADE:-gen.CHUNK_OVERLAP].min() == 1
+            if i < len(weights) - 1:
+                assert not w[-gen.CHUNK_MARGIN:].any()
+    # where exactly two chunks overlap by CHUNK_OVERLAP the weights sum to 1 before normalising
+    w0, w1 = gen.chunk_weights([0, 512], 1024)
+    np.testing.assert_allclose(w0[512:] + w1[:512], 1.0, atol=1e-12)
+    with pytest.raises(gen.GenerateError, match="chunk_T must be"):
+        gen.chunk_starts(4096, 1000)
+
+
+@pytest.fixture(scope="module")
+def gait_model(repo):
+    """The tiny G at its initialisation with a gait phase and a root-height head, plus the
+    rest-pose prior and the curve frame (a G whose outputs look like a body following the curve;
+    the random parameters of `run` make a chaotic G whose outputs depend on every statistic). Its
+    stride head is set so that Sad and Happy stride 0.8 m and 1.4 m (at initialisation every
+    stride is 1 m)."""
+    from flax import nnx
+
+    cfg = override(load_config(repo / "configs" / "tiny.py"),
+                   ["model.output_prior=rest_and_curve", "model.g_frame=curve", "model.gait_phase=true",
+                    "model.root_height=true"])
+    layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
+    state = step_lib.init_state(cfg, layout, len(NAMES), jax.random.key(0))
+    from motiongan_jax.nn.generator import STRIDE_GAIN
+
+    g = step_lib.generator(state)
+    w = gen.style_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
+    g.stride_head.kernel[...] = (np.linalg.pinv(w) @ (np.log([0.8, 1.4]) / STRIDE_GAIN))[:, None]
+    return state.replace(g_params=nnx.state(g, nnx.Param)), layout
+
+
+def _wandering(T, seed=0, spacing=SPEED / 15, straight_from=None):
+    """(T, 3) samples of a walk whose heading wanders smoothly (no period), straight from sample
+    `straight_from` on if given (from there every step is the same vector)."""
+    rng = np.random.default_rng(seed)
+    heading = np.cumsum(np.convolve(rng.normal(0, 0.08, T + 200), np.ones(60) / 60, "same")[100:100 + T])
+    if straight_from is not None:
+        heading[straight_from:] = heading[straight_from]
+    steps = spacing * np.stack([np.cos(heading), np.zeros(T), np.sin(heading)], -1)
+    steps[0] = 0.0
+    return np.cumsum(steps, axis=0).astype(np.float32)
+
+
+def _wrap(a):
+    """Angles to (-π, π]."""
+    return np.angle(np.exp(1j * a))
+
+
+def _compiled_fast(jitted):
+    """`jitted` compiled once per input shape with XLA's backend optimiser off (as the train-step
+    tests do): compiling dominates on CPU, and one pass and the chunks are compiled alike."""
+    fast = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+    cache = {}
+
+    def call(*args):
+        key = tuple((np.shape(a), str(np.asarray(a).dtype)) for a in args[1:] if a is not None)
+        if key not in cache:
+            cache[key] = jitted.lower(*args).compile(compiler_options=fast)
+        return cache[key](*args)
+    return call
+
+
+def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monkeypatch):
+    """A curve of 1530 samples, two styles (strides 0.8 and 1.4 m) at their own phase offsets, G
+    with a gait phase and a root-height head: G runs on the curve padded to 1536, in one pass and
+    in chunks of 1024 (starts 0 and 512).
+
+    Padding: the curve is straight from sample 1500, so its extension is the 1536-sample curve
+    itself and the motion is that curve's first 1530 frames up to the float32 rounding of the
+    extended points (measured 8e-7 of the largest pose value; bound 1e-5).
+    The clock: each chunk's phase offset continues the walked distance, so the phase G walks in
+    every chunk is one pass's up to float32 rounding of phases that reach 965 rad (measured
+    1.5e-4 rad; bound 1e-3). The second chunk restarted at the walk's offset would be 1.3 and
+    1.6 rad off.
+    The outputs are close to one pass's, not equal to float rounding, and cannot be: G
+    instance-normalises over its input's time axis, and each chunk's statistics are its own 1024
+    samples, not all 1536. Measured: 3.8e-4 relative RMS of the pose rows, 0.17 mm mean
+    root-relative joint error, a root path 0.10 m (0.08% of the walk) and a root height at most
+    14 mm (within the first chunk, where its statistics differ most) off one pass's; bounds at
+    about 3x. Where the second chunk alone is used the pose is 2.7e-4 off, and 6.8e-3 off with a
+    restarted clock: the phase, not the statistics, is what a restart would break."""
+    state, layout = gait_model
+    M, L = 1530, 1024
+    monkeypatch.setattr(gen, "_apply_g", _compiled_fast(gen._apply_g))
+    real = gen._apply_g
+    full = _wandering(1536, straight_from=1500)
+    w = gen.style_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
+    phi0 = np.array([0.5, 4.0])
+    ref = gen.generate_motion(state, layout, full, w, phi0)
+    calls, progress = [], []
+    monkeypatch.setattr(gen, "_apply_g", lambda st, v, ww, ph: (calls.append((v, ww, ph)), real(st, v, ww, ph))[1])
+    one = gen.generate_motion(state, layout, full[:M], w, phi0)
+    assert [c[0].shape for c in calls] == [(2, 1536, 3)]
+    calls.clear()
+    ch = gen.generate_motion(state, layout, full[:M], w, phi0, chunk_T=L, progress=lambda d, n: progress.append((d, n)))
+    assert [c[0].shape for c in calls] == [(2, L, 3)] * 2 and progress == [(1, 2), (2, 2)]
+    chex.assert_shape([one.positions, ch.positions], (2, M, layout.num_joints, 3))
+    # the whole curve is walked: padded and cropped = the longer curve's first M frames
+    scale = np.abs(ref.pose).max()
+    np.testing.assert_allclose(one.pose, ref.pose[:, :M], atol=1e-5 * scale)
+    np.testing.assert_allclose(one.root_velocity, ref.root_velocity[:, :M], atol=1e-5 * scale)
+    # one clock: the phase G walks in each chunk is one pass's
+    g = step_lib.generator(state)
+    np.testing.assert_allclose(np.exp(np.asarray(g.log_stride(jax.numpy.asarray(w)))), [0.8, 1.4], rtol=1e-4)
+    clock = np.asarray(g.walked_phase(curves.velocity(jax.numpy.asarray(np.stack([full] * 2))), jax.numpy.asarray(w),
+                                      jax.numpy.asarray(phi0, jax.numpy.float32)))
+    for (v, ww, ph), s in zip(calls, (0, 512)):
+        err = np.abs(_wrap(np.asarray(g.walked_phase(v, ww, ph)) - clock[:, s:s + L])).max()
+        assert err < 1e-3, (s, err)
+    v1, w1, _ = calls[1]
+    restart = jax.numpy.asarray(phi0, jax.numpy.float32)
+    assert np.abs(_wrap(np.asarray(g.walked_phase(v1, w1, restart)) - clock[:, 512:])).min() > 1.0
+    # the outputs: close to one pass (each chunk's own statistics)
+    rel = lambda a, b: np.sqrt(np.mean((a - b) ** 2) / np.mean(b ** 2))  # noqa: E731
+    rooted = lambda g: g.positions - g.positions[:, :, :1]  # noqa: E731
+    height = lambda g: g.positions[:, :, 0, 1] - g.floor_shift_m[:, None]  # noqa: E731
+    assert rel(ch.pose, one.pose) < 1.2e-3
+    assert np.linalg.norm(rooted(ch) - rooted(one), axis=-1).mean() < 5e-4
+    assert np.linalg.norm(ch.positions[:, :, 0, [0, 2]] - one.positions[:, :, 0, [0, 2]], axis=-1).mean() < 0.3
+    assert np.abs(height(ch) - height(one)).max() < 0.04
+    # where the second chunk alone is used, a restarted clock is far further off than the statistics
+    tail = slice(512 + gen.CHUNK_MARGIN + gen.CHUNK_FADE, M)
+    restarted = np.asarray(real(state, v1, w1, restart)[1])[:, tail.start - 512:M - 512]
+    assert rel(restarted, one.pose[:, tail]) > 10 * rel(ch.pose[:, tail], one.pose[:, tail])
+    # no seam: where the chunks blend, pose, root velocity and height change no faster than elsewhere
+    seam = slice(512 + gen.CHUNK_MARGIN, 1024 - gen.CHUNK_MARGIN)
+    for x in (ch.pose, ch.root_velocity, height(ch)[..., None]):
+        jump = np.abs(np.diff(x, axis=1)).max(axis=(0, 2))
+        assert jump[seam].max() < 1.5 * max(jump[:seam.start].max(), jump[seam.stop:].max())
+    with pytest.raises(gen.GenerateError, match="phase offsets must be 2 finite numbers"):
+        gen.generate_motion(state, layout, full[:M], w, np.zeros(3))
+
+
+def test_motions_are_generated_in_groups_that_fit_batch_samples(run, monkeypatch):
+    """5 motions at 96 samples with BATCH_SAMPLES 200: G gets 2 motions per call (the last group
+    padded, so one compile), and the motions come back in order. G is a stand-in whose output
+    depends on each motion's code and each sample's input, so a misplaced group would show."""
+    state, meta, cfg, layout = run
+    calls = []
+
+    def fake_g(st, v, w, phase):
+        calls.append(v.shape)
+        root = v * w[:, :1, None]
+        pose = jax.numpy.broadcast_to(jax.numpy.cumsum(v[..., :1], axis=1) + w[:, None, 1:2],
+                                      v.shape[:2] + (layout.num_rows,))
+        return root, pose
+
+    monkeypatch.setattr(gen, "_apply_g", fake_g)
+    curve = _wandering(T_LONG)
+    w = np.random.default_rng(1).normal(size=(5, 8)).astype(np.float32)
+    one = gen.generate_motion(state, layout, curve, w)
+    assert calls == [(5, T_LONG, 3)]
+    calls.clear()
+    monkeypatch.setattr(gen, "BATCH_SAMPLES", 200)
+    grouped = gen.generate_motion(state, layout, curve, w)
+    assert calls == [(2, T_LONG, 3)] * 3
+    np.testing.assert_array_equal(grouped.pose, one.pose)
+    np.testing.assert_array_equal(grouped.positions, one.positions)
 
 
 def test_figures_panels():
@@ -220,8 +468,10 @@ def test_figures_panels():
 
 
 def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, capsys):
-    """One real subprocess (.npz); the .bvh of the same motion in-process; FK of the re-read BVH
-    matches the npz's skeleton positions and the generated bone directions."""
+    """One real subprocess (.npz); the .bvh of the same motion in-process, in both hierarchies;
+    FK of the re-read BVH matches the npz's skeleton positions and the generated bone directions
+    (all of them in the exact form; all but the best-fit ones, by the stated error, in the
+    source form)."""
     csv = tmp_path / "path.csv"
     length = (T_LONG - 1) * SPEED / 15 + 1e-6
     csv.write_text("x,z\n" + "".join(f"{x},0\n" for x in np.linspace(0, length, 20)))
@@ -238,20 +488,55 @@ def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, ca
     assert list(z["parents"]) == list(checkpoint.load_run(run_dir)[3].parents)
     assert float(z["fps"]) == 15.0 and str(z["style"]) == "Sad:0.3,Happy:0.7"
 
+    capsys.readouterr()
     assert cli([*common, "--out", str(tmp_path / "walk.bvh"), "--bvh-units", "cm"]) == 0
+    note = capsys.readouterr().err
     motion = bvh.read_bvh(tmp_path / "walk.bvh")
     assert motion.frame_time == pytest.approx(1 / 15)
+    # the default hierarchy is the training skeleton's: its joints, the thumbs' own joints, nothing else
+    assert not any("branch" in n for n in motion.skeleton.names)
     layout = representation.layout_from_skeleton(motion.skeleton, 0.01)
-    assert layout.joint_names == tuple(z["joint_names"])
+    assert layout.joint_names == tuple(z["joint_names"]) and layout.parents == tuple(z["parents"])
     world = kinematics.world_positions(motion)[:, list(layout.source_index)] * 0.01
-    np.testing.assert_allclose(world, z["positions_skeleton"], atol=1e-5)
-    angle = np.arctan2(*[f(ik.bone_directions(world, layout.parents), ik.bone_directions(z["positions"], layout.parents))
-                         for f in (lambda a, b: np.linalg.norm(np.cross(a, b), axis=-1),
-                                   lambda a, b: np.sum(a * b, axis=-1))])
-    assert angle.max() < 1e-4  # measured 5e-8 rad (BVH text: 6 decimals of cm and degrees)
+    np.testing.assert_allclose(world, z["positions_skeleton"], atol=1e-5)  # the npz's FK is this file's
+    angle = ik.bone_errors(z["positions"], world, layout.parents)
+    kids = np.bincount(np.asarray(layout.parents[1:]), minlength=layout.num_joints)
+    fitted = np.array([kids[p] > 1 and not n.startswith(("LThumb", "RThumb"))
+                       for p, n in zip(layout.parents[1:], layout.joint_names[1:])])
+    assert angle[:, ~fitted].max() < 1e-4  # measured 5e-8 rad (BVH text: 6 decimals of cm and degrees)
+    # the best-fit bones: the stated error is the measured one
+    m = re.search(r"the (\d+) bones leaving Hips, LeftHand, RightHand, Spine1 are best fits, ([\d.e+-]+) deg mean "
+                  r"and ([\d.e+-]+) deg max", note)
+    assert m and int(m.group(1)) == fitted.sum(), note
+    assert float(m.group(3)) == pytest.approx(np.degrees(angle[:, fitted].max()), rel=0.05, abs=1e-3)
     np.testing.assert_allclose(representation.bone_lengths(
         (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
         atol=1e-6)
+    # the exact form: zero-length branch joints, every bone direction exact; it reads back to the layout too
+    assert cli([*common, "--out", str(tmp_path / "exact.bvh"), "--bvh-hierarchy", "exact"]) == 0
+    exact = bvh.read_bvh(tmp_path / "exact.bvh")
+    assert sum(n.endswith("_branch") for n in exact.skeleton.names) == 8
+    again = representation.layout_from_skeleton(exact.skeleton, 1.0)
+    assert again.joint_names == layout.joint_names and again.parents == layout.parents
+    world = kinematics.world_positions(exact)[:, list(again.source_index)]
+    assert ik.bone_errors(z["positions"], world, layout.parents).max() < 1e-4
+
+
+def test_cli_progress_shows_only_when_generation_is_slow(repo):
+    import io
+
+    spec = importlib.util.spec_from_file_location("_generate_cli_progress", repo / "bin" / "generate.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    now = [0.0]
+    out = io.StringIO()
+    bar = module.Progress(out, delay=2.0, clock=lambda: now[0])
+    now[0] = 1.0
+    bar(1, 4)  # one second in: quiet
+    assert out.getvalue() == ""
+    now[0] = 6.0
+    bar(2, 4)
+    assert out.getvalue().strip() == "generating [##########          ] 2/4 G calls, 6 s, about 6 s left"
 
 
 def test_cli_params_choose_the_moving_average_or_the_raw_g(repo, cli, tmp_path):
@@ -321,11 +606,16 @@ def test_cli_figure_png(run_dir, cli, tmp_path):
     (["--workdir", "NOWHERE"], "a.bvh", "no checkpoints in"),
     ([], "no_dir/a.bvh", "directory .*no_dir does not exist"),
     ([], "a.avi", "unsupported format '.avi'"),
+    (["--length", "1e7"], "a.bvh", r"10,000,000 m is longer than the limit of 10,000 m"),
+    (["--curve", "FAR.csv"], "a.npz", r"FAR.csv: 1,000,000,000 m is longer than the limit"),
+    (["--length", "2900"], "a.bvh", r"36,251 samples .* more than the limit of 36,000"),
+    (["--length", "300"], "a.gif", r"a GIF of 1 panel\(s\) x 3,751 frames is more than the limit"),
     ([], "/proc/a.bvh", "cannot write /proc/a.bvh: directory /proc (is not writable|does not exist)"),
 ])
 def test_cli_errors_exit_non_zero_and_leave_no_file(run_dir, cli, tmp_path, capsys, extra, out_name, match):
     (tmp_path / "EMPTY.csv").write_text("")
     (tmp_path / "SAME.csv").write_text("0,0\n0,0\n")
+    (tmp_path / "FAR.csv").write_text("0,0\n1e9,0\n")
     np.save(tmp_path / "W.npy", np.zeros(5))
     args = {"--workdir": str(run_dir), "--style": "Happy", "--curve": "line"}
     for k, v in zip(extra[::2], extra[1::2]):

@@ -73,52 +73,132 @@ def test_min_rotation_maps_a_to_b_including_opposite_and_equal_vectors():
     np.testing.assert_allclose(np.sum(rotvec * a[20:], axis=-1), 0.0, atol=1e-9)
 
 
-def test_export_skeleton_adds_a_zero_length_branch_per_child_of_a_branching_joint(layout):
-    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m)
+def _fitted_bones(layout):
+    """Bone indices (joint - 1) leaving a joint with several children (their parent's best fit)."""
+    kids = np.bincount(np.asarray(layout.parents[1:]), minlength=layout.num_joints)
+    return np.array([kids[layout.parents[j]] > 1 for j in range(1, layout.num_joints)])
+
+
+def test_export_skeleton_source_keeps_the_training_hierarchy_exact_adds_branches(layout):
+    src = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m)
+    sk = src.skeleton
+    assert [sk.names[e] for e in src.kept_index] == list(layout.joint_names)
+    # the source hierarchy: the layout's joints plus the source's zero-length thumb joints (their
+    # End Sites are "LThumb_EndSite"), nothing else; each kept joint under its own layout parent
+    source = synthetic.cmu_skeleton()
+    extra = [n for n in sk.names if n not in layout.joint_names]
+    assert sorted(extra) == ["LThumb", "RThumb"] and all(n in source.names for n in extra)
+    assert not any("branch" in n for n in sk.names)
+    for j in range(1, layout.num_joints):
+        e = src.kept_index[j]
+        above = sk.parents[e] if src.helper_index[j] < 0 else sk.parents[sk.parents[e]]
+        assert above == src.kept_index[layout.parents[j]], layout.joint_names[j]
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m, hierarchy="exact")
     sk = ex.skeleton
     assert [sk.names[e] for e in ex.kept_index] == list(layout.joint_names)
     extra = [n for n in sk.names if n not in layout.joint_names]
     # Hips (3 children), Spine1 (3), each hand (2)
     assert len(extra) == 3 + 3 + 2 + 2
     assert "LThumb" in extra and "RThumb" in extra  # a leaf's branch is named so the reader restores it
+    assert sum(n.endswith("_branch") for n in extra) == 8
     for e, n in enumerate(sk.names):
         if n in extra:
             assert np.all(sk.offsets[e] == 0) and len(sk.channels[e]) == 3
     assert sk.channels[0][:3] == ik.ROOT_CHANNELS
+    with pytest.raises(ik.IKError, match="hierarchy must be one of"):
+        ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m, hierarchy="branched")
 
 
-@pytest.mark.parametrize("units", ["m", "cm"])
-def test_rigid_poses_round_trip_through_bvh_text(layout, units, tmp_path):
-    """FK on the rest skeleton -> IK -> BVH file -> read_bvh -> FK gives the positions back."""
+@pytest.mark.parametrize("hierarchy,units", [("source", "m"), ("source", "cm"), ("exact", "m"), ("exact", "cm")])
+def test_rigid_poses_round_trip_through_bvh_text(layout, hierarchy, units, tmp_path):
+    """FK on the rest skeleton -> IK -> BVH file -> read_bvh -> FK gives the positions back
+    (a rigid pose is its own best fit, so the source hierarchy is exact here too)."""
     scale = {"m": 1.0, "cm": 100.0}[units]
     pos = _layout_motion(layout, 60, seed=2)
     motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m,
-                                    1 / 15, units_per_m=scale)
-    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m, scale)
+                                    1 / 15, units_per_m=scale, hierarchy=hierarchy)
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m, scale, hierarchy)
     assert np.abs(ik.layout_positions(motion, ex) - pos).max() < 1e-9  # in memory
     path = tmp_path / f"rigid_{units}.bvh"
     bvh.write_bvh(path, motion, precision=7)
     back = bvh.read_bvh(path)
+    assert back.skeleton.names == ex.skeleton.names and back.skeleton.parents == ex.skeleton.parents
     got = kinematics.world_positions(back)[:, list(ex.kept_index)] / scale
     assert np.abs(got - pos).max() < 1e-5  # measured 5e-8 m (metres, 7 decimals), 2e-8 m (cm, 6)
-    # reading the file with the usual rules recovers the layout: branch joints are zero-length
+    # reading the file with the usual rules recovers the layout: extra joints are zero-length
     again = representation.layout_from_skeleton(back.skeleton, 1.0 / scale)
     assert again.joint_names == layout.joint_names and again.parents == layout.parents
     np.testing.assert_allclose(again.rest_offsets_m, layout.rest_offsets_m, atol=1e-6)
 
 
-def test_non_rigid_poses_get_exact_bone_directions_and_the_skeletons_lengths(layout):
+def test_leaves_read_back_under_their_own_names(tmp_path):
+    """Bandai's form: leaves are joints whose End Sites have zero length (dropped from the
+    layout); a leaf "X_EndSite" under another parent gets its zero-length joint X back."""
+    offsets = np.array([[0, 0, 0], [0, 90, 0], [0, 10, 0], [0, 0, 0], [9, -40, 0], [0, 0, 0],
+                        [-9, -40, 0], [0, 0, 0], [0, 0, 3]], float)
+    names = ("joint_Root", "Hips", "Head", "Head_EndSite", "Leg_L", "Leg_L_EndSite", "Leg_R", "Toe", "Toe_EndSite")
+    parents = (-1, 0, 1, 2, 1, 4, 1, 6, 7)
+    chans = tuple(() if n.endswith("_EndSite") else ("Xposition", "Yposition", "Zposition", "Zrotation",
+                                                       "Xrotation", "Yrotation") for n in names)
+    layout = representation.layout_from_skeleton(bvh.Skeleton(names, parents, offsets, chans), 0.01)
+    assert layout.joint_names == ("Hips", "Head", "Leg_L", "Leg_R", "Toe_EndSite")  # Toe is zero-length
+    rng = np.random.default_rng(7)
+    pos = representation.rest_positions(layout)[None] + rng.normal(0, 0.02, (20, 5, 3))
+    for hierarchy in ik.HIERARCHIES:
+        motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m,
+                                        1 / 30, units_per_m=100.0, hierarchy=hierarchy)
+        bvh.write_bvh(tmp_path / f"{hierarchy}.bvh", motion, precision=6)
+        back = bvh.read_bvh(tmp_path / f"{hierarchy}.bvh")
+        again = representation.layout_from_skeleton(back.skeleton, 0.01)
+        assert again.joint_names == layout.joint_names and again.parents == layout.parents, hierarchy
+        if hierarchy == "source":
+            assert [n for n in back.skeleton.names if n not in layout.joint_names] == \
+                ["Head_EndSite", "Leg_L_EndSite", "Toe"]  # the source's own names, nothing added
+
+
+@pytest.mark.parametrize("hierarchy", ik.HIERARCHIES)
+def test_non_rigid_poses_get_the_skeletons_lengths_and_exact_or_best_fit_directions(layout, hierarchy):
     rng = np.random.default_rng(3)
     rigid = _layout_motion(layout, 80, seed=4)
     pos = rigid + rng.normal(0, 0.03, rigid.shape)  # bones 3 cm off in every direction
-    motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m, 1 / 15)
-    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m)
+    motion = ik.positions_to_motion(pos, layout.joint_names, layout.parents, layout.rest_offsets_m, 1 / 15,
+                                    hierarchy=hierarchy)
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m, hierarchy=hierarchy)
     got = ik.layout_positions(motion, ex)
     angle = _angles(ik.bone_directions(got, layout.parents), ik.bone_directions(pos, layout.parents))
-    assert angle.max() < 1e-4  # measured 3e-11 rad (5e-8 rad through BVH text)
+    np.testing.assert_allclose(ik.bone_errors(pos, got, layout.parents), angle, atol=1e-12)
     np.testing.assert_allclose(_lengths(got, layout.parents),
                                np.broadcast_to(layout.bone_lengths_m, (80, layout.num_joints - 1)), atol=1e-9)
     np.testing.assert_allclose(got[:, 0], pos[:, 0], atol=1e-12)
+    fitted = _fitted_bones(layout) & (np.asarray(ex.helper_index[1:]) < 0)
+    if hierarchy == "exact":
+        assert angle.max() < 1e-4  # measured 3e-11 rad (5e-8 rad through BVH text)
+        return
+    assert angle[:, ~fitted].max() < 1e-9  # every bone not leaving a branching joint is exact
+    assert angle[:, fitted].mean() > 1e-3  # the 3 cm noise moves the others (~0.1 rad)
+    # the best fit: each branching joint's world rotation minimises sum |R r_k - d_k|^2 over its
+    # children (unit directions): no nearby rotation does better
+    rest_dir = layout.rest_offsets_m / np.linalg.norm(layout.rest_offsets_m, axis=-1, keepdims=True).clip(1e-12)
+    parents = np.asarray(layout.parents)
+    checked = []
+    for j in sorted(set(parents[1:][fitted])):
+        kids = np.flatnonzero(parents == j)
+        if any(ex.helper_index[c] >= 0 for c in kids):
+            continue  # a hand: its thumb's restored joint makes the thumb exact (checked above)
+        checked.append(layout.joint_names[j])
+        d = pos[:, kids] - pos[:, j:j + 1]
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        # the fitted rotation, recovered from FK: it maps the rest directions to the exported ones
+        out = got[:, kids] - got[:, j:j + 1]
+        out /= np.linalg.norm(out, axis=-1, keepdims=True)
+        R = ik.kabsch(rest_dir[kids], out)  # exact: the exported child directions are R r_k
+        np.testing.assert_allclose(np.einsum("fij,kj->fki", R, rest_dir[kids]), out, atol=1e-9)
+        cost = np.sum((np.einsum("fij,kj->fki", R, rest_dir[kids]) - d) ** 2, axis=(1, 2))
+        for _ in range(20):
+            Q = Rotation.from_rotvec(rng.normal(0, 0.01, (80, 3))).as_matrix() @ R
+            worse = np.sum((np.einsum("fij,kj->fki", Q, rest_dir[kids]) - d) ** 2, axis=(1, 2))
+            assert np.all(worse >= cost - 1e-12), layout.joint_names[j]
+    assert checked == ["Hips", "Spine1"]
 
 
 def test_degenerate_and_collinear_cases():
@@ -129,14 +209,20 @@ def test_degenerate_and_collinear_cases():
     rng = np.random.default_rng(5)
     pos = rng.normal(size=(30, 6, 3))  # arbitrary, non-rigid
     pos[3, 1] = pos[3, 0]  # a zero-length posed bone keeps its rest direction
-    motion = ik.positions_to_motion(pos, names, parents, rest, 0.1)
-    ex = ik.export_skeleton(names, parents, rest)
-    got = ik.layout_positions(motion, ex)
-    assert np.isfinite(got).all()
     ok = np.ones((30, 5), bool)
     ok[3, 0] = False
-    angle = _angles(ik.bone_directions(got, parents), ik.bone_directions(pos, parents))
-    assert angle[ok].max() < 1e-9
+    for hierarchy in ik.HIERARCHIES:
+        motion = ik.positions_to_motion(pos, names, parents, rest, 0.1, hierarchy=hierarchy)
+        ex = ik.export_skeleton(names, parents, rest, hierarchy=hierarchy)
+        got = ik.layout_positions(motion, ex)
+        assert np.isfinite(got).all()
+        angle = _angles(ik.bone_directions(got, parents), ik.bone_directions(pos, parents))
+        if hierarchy == "exact":
+            assert angle[ok].max() < 1e-9
+        else:  # joint a points its first child b exactly; its second, c, goes where that puts it
+            others = [0, 1, 3, 4]
+            assert angle[:, others][ok[:, others]].max() < 1e-9
+            assert angle[:, 2].max() > 0.1
     with pytest.raises(ik.IKError, match="non-finite"):
         bad = pos.copy()
         bad[4, 2, 0] = np.nan

@@ -234,6 +234,28 @@ def test_training_on_one_batch_makes_g_follow_its_curves(tiny, tmp_path, monkeyp
     assert np.median(curve[50:]) < 0.05 * curve[0], (curve[0], np.median(curve[50:]))
 
 
+def test_dry_run_of_the_paper_config_needs_no_data(repo, capsys, tmp_path):
+    """Without the CMU files the paper model is described from the config: CMU's hierarchy
+    (28 kept joints, 81 rows) and its 28 styles give the paper's parameter counts."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("train_cli_dry", repo / "bin" / "train.py")
+    cli = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cli)
+    wd = tmp_path / "wd"
+    assert cli.main(["--config", str(repo / "configs" / "paper.py"), "--workdir", str(wd), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "no data given: CMU's skeleton" in out and "28 styles of data.styles" in out
+    assert "28 kept joints -> 81 rows" in out
+    assert "generator: 16,156,164 parameters" in out and "discriminator: 2,702,173 parameters" in out
+    assert cli.main(["--config", str(repo / "configs" / "bandai.py"), "--workdir", str(wd), "--dry-run"]) == 2
+    assert "label rule 'bandai' takes its skeleton and styles from the files; pass --data" in capsys.readouterr().err
+    # training still needs the data
+    assert cli.main(["--config", str(repo / "configs" / "paper.py"), "--workdir", str(wd)]) == 2
+    assert "needs a data directory" in capsys.readouterr().err
+    assert not wd.exists()
+
+
 def test_repeated_set_flags_all_apply(repo, capsys):
     """`--set a=1 --set b=2` applies both (the first was once silently dropped)."""
     import importlib.util

@@ -32,7 +32,8 @@ import numpy as np
 from motiongan_jax import curves
 from motiongan_jax import generate as gen_lib
 
-# Limits the server enforces on every request (each breach is a 400 naming it)
+# Limits the server enforces on every request (each breach is a 400 naming it): an interactive
+# page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
 MAX_POINTS = 20_000  # floor points of a drawn path
 MAX_PATH_M = 60.0  # metres of path
 MAX_STYLES = 6  # panels side by side (one style each)
@@ -154,14 +155,6 @@ class Result:
     batch_bucket: int
 
 
-def _extend_straight(curve_Tx3: np.ndarray, n: int) -> np.ndarray:
-    """The curve with n more samples straight on along its last direction at its last spacing."""
-    if n == 0:
-        return curve_Tx3
-    d = curve_Tx3[-1] - curve_Tx3[-2]
-    return np.concatenate([curve_Tx3, curve_Tx3[-1] + d * np.arange(1, n + 1, dtype=np.float32)[:, None]])
-
-
 def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")[:60] or "walk"
 
@@ -242,7 +235,7 @@ class Engine:
         B = len(w)
         Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
         w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
-        full = gen_lib.generate_motion(self.state, self.layout, _extend_straight(curve_T, Tb - T), w_pad)
+        full = gen_lib.generate_motion(self.state, self.layout, gen_lib.extend_straight(curve_T, Tb - T), w_pad)
         raw = full.positions[:B, :T].copy()
         raw[..., 1] -= full.floor_shift_m[:B, None, None]
         shift = gen_lib.floor_shift(raw)
