@@ -1,4 +1,4 @@
-"""Evaluation metrics (spec: /work/shared/spec/evaluation.md; reference definitions §5.6).
+"""Evaluation metrics: the reference protocol's definitions, plus gait measures on toe tracks.
 
 Pure functions of arrays: numpy/scipy, no state, no I/O. The evaluation driver produces the
 inputs (evaluator logits and features, generated and real joints, curves) and forms ratios
