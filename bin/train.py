@@ -7,6 +7,12 @@
 Without --data it trains on the embedded default dataset (procedural styled walks, generated
 on first use into the cache). Writes DIR/metrics.jsonl, DIR/checkpoints/, DIR/previews/*.gif,
 DIR/config.json and DIR/{train,val}_files.txt.
+
+Several processes (hosts, or one process per GPU): start the same command in each, with
+--coordinator HOST:PORT --num-processes N --process-id I, or the variables JAX_COORDINATOR_ADDRESS,
+JAX_NUM_PROCESSES, JAX_PROCESS_ID; under SLURM's srun or Open MPI's mpirun (more than one task)
+jax reads the launcher's own variables and no flag is needed. The workdir must be one shared
+directory; process 0 writes everything but the checkpoints, which all write together.
 """
 
 import argparse
@@ -27,12 +33,17 @@ def main(argv=None) -> int:
                     help="override config fields (repeatable: --set a=1 b=2 --set c=3)")
     ap.add_argument("--dry-run", action="store_true", help="print parameter counts and shapes, then exit")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                    help="several processes: process 0's address (with --num-processes, --process-id)")
+    ap.add_argument("--num-processes", type=int, default=None)
+    ap.add_argument("--process-id", type=int, default=None)
     args = ap.parse_args(argv)
 
     from motiongan_jax.bvh import BVHError
     from motiongan_jax.checkpoint import CheckpointError
     from motiongan_jax.config import ConfigError, load_config, override, validate
     from motiongan_jax.data import DataError
+    from motiongan_jax.parallel import DistributedError
 
     try:
         cfg = load_config(args.config, check=False)
@@ -52,18 +63,20 @@ def main(argv=None) -> int:
         from motiongan_jax import parallel
         from motiongan_jax.train import NonFiniteError, train
 
-        # several hosts: only when the coordinator variables are set (docs/PERFORMANCE.md)
-        parallel.maybe_initialize_distributed()
+        # several processes: from the flags, the variables or the launcher (docs/PERFORMANCE.md)
+        parallel.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
         last = train(cfg, args.workdir, progress=not args.no_progress)
-    except (ConfigError, DataError, BVHError, CheckpointError) as err:
+        primary = parallel.is_primary()
+    except (ConfigError, DataError, BVHError, CheckpointError, DistributedError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     except NonFiniteError as err:
         print(f"error: {err}", file=sys.stderr)
         return 3
-    if last:
-        print("final " + " ".join(f"{k}={v:.4g}" for k, v in sorted(last.items())))
-    print(f"done: {args.workdir}")
+    if primary:
+        if last:
+            print("final " + " ".join(f"{k}={v:.4g}" for k, v in sorted(last.items())))
+        print(f"done: {args.workdir}")
     return 0
 
 

@@ -43,10 +43,12 @@ def read_meta(mngr: ocp.CheckpointManager, step: int | None = None) -> tuple[int
 
 
 def restore(mngr: ocp.CheckpointManager, step: int, like_state):
-    """Restore the state at `step` with the structure, shapes and dtypes of `like_state`.
-    Checkpoints written before a state field existed restore when `like_state` leaves that
-    field None (see _LATER_FIELDS)."""
-    abstract = jax.tree.map(ocp.utils.to_shape_dtype_struct, like_state)
+    """Restore the state at `step` with the structure, shapes, dtypes and shardings of
+    `like_state`; leaves without a sharding (jax.eval_shape's) go to this process's first device,
+    so a checkpoint written by several devices or processes loads on one. Checkpoints written
+    before a state field existed restore when `like_state` leaves that field None (see
+    _LATER_FIELDS)."""
+    abstract = jax.tree.map(_target, like_state)
     try:
         return _restore(mngr, step, abstract)
     except (ValueError, KeyError, TypeError) as err:
@@ -57,6 +59,14 @@ def restore(mngr: ocp.CheckpointManager, step: int, like_state):
             except (ValueError, KeyError, TypeError):
                 pass
         raise CheckpointError(f"checkpoint {mngr.directory}/{step} does not fit this model: {err}") from err
+
+
+def _target(leaf):
+    target = ocp.utils.to_shape_dtype_struct(leaf)
+    if getattr(target, "sharding", None) is None:
+        target = jax.ShapeDtypeStruct(target.shape, target.dtype,
+                                      sharding=jax.sharding.SingleDeviceSharding(jax.local_devices()[0]))
+    return target
 
 
 # TrainState fields added after checkpoints already existed; None when their option is off

@@ -3,6 +3,13 @@
 Every random choice is a pure function of the seed and the step: the batch of step s comes from
 fold_in(data_key, s) and the step's own key is fold_in(step_key, s). A run killed and resumed
 from its latest checkpoint therefore repeats exactly what an unbroken run does.
+
+With several devices the step runs data parallel (parallel.py), also across processes: every
+process runs this loop; each draws the same global batch and feeds its devices their rows,
+gradients are averaged across all devices, the state stays replicated. Process 0 alone writes
+the config, the file lists, metrics, previews and the progress bar (and loads the data first, so
+that only it fills the preprocessing cache); checkpoints are saved and restored by every process
+together (orbax), so a killed multi-process run resumes like a single one.
 """
 
 from __future__ import annotations
@@ -120,47 +127,68 @@ def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray,
 # the loop
 # ----------------------------------------------------------------------------------------------
 
-def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print) -> dict:
-    """Train (or resume) in `workdir`; returns the last logged metrics."""
-    workdir = Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
-    dataset = data.load_dataset(cfg.data, log=log)
-    data.write_file_lists(workdir, [(c.source, c.label) for c in dataset.train], [(c.source, c.label) for c in dataset.val])
-    meta = run_meta(cfg, dataset)
-    atomic.write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
-
-    arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
-    k_init, k_data, k_step = keys(cfg.train.seed)
-    state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
+def make_step_fn(cfg: Config, dataset, log=print):
+    """The pure `train_step(state, batch, key)` for this dataset, with the gait targets of its
+    training clips when the config's gait terms need them."""
     gait = None
     t = cfg.train
     if t.w_g_stride or t.w_g_floor or t.w_g_skate:
         gait = data.gait_targets(dataset.train, dataset.style_names, dataset.layout)
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
             + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))
-    step_fn = step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
-    sample_fn = data.make_sample_batch(cfg.data, cfg.train.batch_size)
-    if jax.device_count() > 1:  # data parallel: batch split over devices, state replicated
+    return step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
+
+
+def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print) -> dict:
+    """Train (or resume) in `workdir`; returns the last logged metrics. In a multi-process run
+    every process calls this; only process 0 logs and writes files (module doc)."""
+    workdir = Path(workdir)
+    primary = parallel.is_primary()
+    if not primary:
+        log, progress = (lambda *a, **k: None), False
+    if primary:  # the others read the cache it fills
+        workdir.mkdir(parents=True, exist_ok=True)
+        dataset = data.load_dataset(cfg.data, log=log)
+    parallel.sync("dataset")
+    if not primary:
+        dataset = data.load_dataset(cfg.data, log=log)
+    meta = run_meta(cfg, dataset)
+    if primary:
+        data.write_file_lists(workdir, [(c.source, c.label) for c in dataset.train],
+                              [(c.source, c.label) for c in dataset.val])
+        atomic.write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
+
+    arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
+    k_init, k_data, k_step = keys(cfg.train.seed)
+    state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
+    step_fn = make_step_fn(cfg, dataset, log)
+
+    def keyed_step(state, batch, key, s):  # the step's key, fold_in(k_step, s), made on the device
+        return step_fn(state, batch, jax.random.fold_in(key, s))
+
+    # every process draws the whole batch on its first local device (parallel.py's module doc)
+    sample_batch = jax.jit(data.make_sample_batch(cfg.data, cfg.train.batch_size))
+    parallel_run = jax.device_count() > 1
+    if parallel_run:  # data parallel: batch split over the devices of every process, state replicated
         mesh = parallel.data_mesh()
-        train_step = parallel.shard_step(step_fn, mesh, cfg.train.batch_size)
-        sample_batch = jax.jit(sample_fn, out_shardings=parallel.batch_sharded(mesh))
+        train_step = parallel.shard_step(keyed_step, mesh, cfg.train.batch_size, num_replicated=2)
         state = parallel.put_state(state, mesh)
-        log(f"data parallel over {jax.device_count()} devices")
+        step_key = parallel.put_key(k_step, mesh)
+        log(f"data parallel over {jax.device_count()} devices in {jax.process_count()} process(es)")
     else:
-        train_step = jax.jit(step_fn, donate_argnums=0)
-        sample_batch = jax.jit(sample_fn)
+        train_step = jax.jit(keyed_step, donate_argnums=0)
+        step_key = k_step
 
     mngr = checkpoint.manager(workdir / "checkpoints", keep=cfg.train.keep_checkpoints)
     start = 0
     if mngr.latest_step() is not None:
         ck_step, ck_meta = checkpoint.read_meta(mngr)
         checkpoint.check_compatible(ck_meta, meta, str(workdir / "checkpoints"))
-        state = checkpoint.restore(mngr, ck_step, state)
-        if jax.device_count() > 1:
-            state = parallel.put_state(state, mesh)
+        state = checkpoint.restore(mngr, ck_step, state)  # into the state's own sharding
         start = ck_step
         log(f"resumed from checkpoint at step {start} in {workdir / 'checkpoints'}")
-    _truncate_metrics(workdir / "metrics.jsonl", start)
+    if primary:
+        _truncate_metrics(workdir / "metrics.jsonl", start)
     total = cfg.train.num_steps
     if start >= total:
         log(f"nothing to do: checkpoint step {start} >= train.num_steps {total}")
@@ -175,24 +203,27 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     pending = None  # (step, metrics) of the previous step, checked one step late to keep dispatch async
     for s in range(start, total):
         batch = sample_batch(arrays, k_data, s)
-        state, metrics = train_step(state, batch, jax.random.fold_in(k_step, s))
+        if parallel_run:
+            batch = parallel.global_batch(batch, mesh)
+        state, metrics = train_step(state, batch, step_key, s)
         if pending is not None:
-            last = _check_and_log(pending, workdir, cfg, bar)
+            last = _check_and_log(pending, workdir, cfg, bar, primary)
         pending = (s + 1, metrics)
         done = s + 1
         if done % cfg.train.checkpoint_every == 0 or done == total:
-            last = _check_and_log(pending, workdir, cfg, bar, force=done == total)
+            last = _check_and_log(pending, workdir, cfg, bar, primary, force=done == total)
             pending = None
-            checkpoint.save(mngr, done, state, meta)
-        if cfg.train.preview_every and done % cfg.train.preview_every == 0:
-            write_preview(workdir / "previews" / f"step_{done:07d}.gif", state, dataset.layout,
-                          dataset.style_names, preview)
+            checkpoint.save(mngr, done, state, meta)  # every process: orbax writes it together
+        if primary and cfg.train.preview_every and done % cfg.train.preview_every == 0:
+            write_preview(workdir / "previews" / f"step_{done:07d}.gif", parallel.local_copy(state),
+                          dataset.layout, dataset.style_names, preview)
     if pending is not None:
-        last = _check_and_log(pending, workdir, cfg, bar, force=True)
+        last = _check_and_log(pending, workdir, cfg, bar, primary, force=True)
     return last
 
 
-def _check_and_log(pending, workdir: Path, cfg: Config, bar: Progress, force: bool = False) -> dict:
+def _check_and_log(pending, workdir: Path, cfg: Config, bar: Progress, primary: bool, force: bool = False) -> dict:
+    """Every process checks (the metrics are replicated: all stop together); process 0 logs."""
     step, metrics = pending
     values = {k: float(v) for k, v in jax.device_get(metrics).items()}
     bad = [k for k, v in values.items() if not math.isfinite(v)]
@@ -200,7 +231,7 @@ def _check_and_log(pending, workdir: Path, cfg: Config, bar: Progress, force: bo
         raise NonFiniteError(
             f"non-finite values at step {step}: {', '.join(bad)}; training stopped, "
             f"the latest checkpoint in {workdir / 'checkpoints'} is the last good one")
-    if force or step % cfg.train.log_every == 0:
+    if primary and (force or step % cfg.train.log_every == 0):
         record = {"step": step, **values}
         _append_jsonl(workdir / "metrics.jsonl", record)
         bar.update(step, values)

@@ -27,7 +27,7 @@ SCRIPT = textwrap.dedent("""
     mesh = parallel.data_mesh()
     sharded = parallel.put_state(step_lib.init_state(cfg, layout, 3, jax.random.key(1)), mesh)
     one, many = jax.jit(fn), parallel.shard_step(fn, mesh, 8)
-    sb = parallel.put_batch(batch, mesh)
+    sb = parallel.global_batch(batch, mesh)
     assert len(sb["pose_BxTxR"].sharding.device_set) == 4
     rel = 0.0
     for s in range(1):
