@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Evaluate a trained run with the project's protocol (docs: ../shared/spec/evaluation.md).
+"""Evaluate a trained run with the project's protocol (docs/DESIGN.md §7).
 
   python bin/evaluate.py --workdir runs/cpu --out runs/cpu/eval
                          [--data DATA_DIR] [--evaluator runs/cpu/evaluator.npz]

@@ -1,6 +1,6 @@
 """The learned style space: codes, PCA, distances, blending, a linear probe, and style search.
 
-Spec §5.8 (analysis) and §5.7 (style search), with the reference's bugs (§6 item 23) fixed.
+docs/DESIGN.md §5.2 (analysis) and §5.3 (style search), with the reference's bugs fixed (§6).
 All numerics are jnp; plots live in `viz.py`, files are written by `bin/analyze.py`.
 
 Style codes. w = LT(label, z): `style_codes` gives, for every label, w at z = 0 (what the

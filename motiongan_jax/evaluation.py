@@ -1,4 +1,4 @@
-"""The evaluation protocol (../shared/spec/evaluation.md) as one driver: curves, generation,
+"""The evaluation protocol (docs/DESIGN.md §7) as one driver: curves, generation,
 every metric for generated and real held-out data side by side, and the reports.
 
 Conventions. Generated clips are placed by `generate.generate_motion` (root integrated from the

@@ -36,8 +36,8 @@ samples per call, MAX_GIF_FRAMES frames x panels per GIF (Pillow holds every fra
 
 Long curves in bounded memory. One G call takes at most CHUNK_T samples (and BATCH_SAMPLES
 motions x samples). G instance-normalises over its whole time axis, so a curve up to CHUNK_T
-goes through in one pass (the statistics span the whole curve, not a training window: spec §6
-item 18); a longer one goes through in overlapping chunks of CHUNK_T samples, blended by
+goes through in one pass (the statistics span the whole curve, not a training window: DESIGN.md
+§5.1); a longer one goes through in overlapping chunks of CHUNK_T samples, blended by
 overlap-add: each chunk's weight is 0 within CHUNK_MARGIN samples of its ends (more than G's
 receptive radius, about 100 samples at kw 5: the layers' half-widths times their strides, so
 what a chunk's zero padding reaches is not used),
@@ -54,7 +54,7 @@ Root height. G predicts the root velocity (y included) and root-relative joints,
 absolute height. The root is integrated from the curve's start (curves.integrate: p[0] = start,
 p[t] = p[t-1] + v[t]), then each clip is lifted as a whole so that the 5th percentile over frames
 of its lowest joint's height is 0: feet on the floor, robust to a few frames of dipping toes.
-(The reference hard-coded a start height per style name, spec §6 item 26.)
+(The reference hard-coded a start height per style name, DESIGN.md §6.)
 
 Outputs (by suffix; several motions -> .bvh/.npz get one file each, `name_<i>.ext`;
 .gif/.mp4/.png show them side by side). Every file is written atomically: on an error nothing

@@ -1,4 +1,4 @@
-"""One training iteration, D then G (spec §4.2), in NNX's functional form.
+"""One training iteration, D then G (docs/DESIGN.md §4.2), in NNX's functional form.
 
 The modules are split once into graph definitions (static) and state (arrays); `train_step` is a
 pure function that merges them inside, so the caller can `jax.jit(..., donate_argnums=0)` it.
@@ -119,7 +119,7 @@ def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=N
 
 
 def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransformation]:
-    """(Adam for G, Adam for D), β = (beta1, beta2), eps 1e-8, no decay or schedule (spec §4.1)."""
+    """(Adam for G, Adam for D), β = (beta1, beta2), eps 1e-8, no decay or schedule (DESIGN.md §4.3)."""
     t = cfg.train
     return (optax.adam(t.lr_g, b1=t.beta1, b2=t.beta2, eps=1e-8),
             optax.adam(t.lr_d, b1=t.beta1, b2=t.beta2, eps=1e-8))

@@ -1,4 +1,4 @@
-"""Discriminator D (spec §3.5): spectral norm on every layer, built for one window length T.
+"""Discriminator D (docs/DESIGN.md §3.5): spectral norm on every layer, built for one window length T.
 
 Input (B x T x 81 x 2, NHWC): channel 0 is the root velocity tiled across the rows (each
 joint's xyz triple sees the root's xyz), channel 1 the pose rows.

@@ -1,4 +1,4 @@
-"""Generator G (spec §3.4): curve velocity + style code w -> root velocity and pose rows.
+"""Generator G (docs/DESIGN.md §3.4): curve velocity + style code w -> root velocity and pose rows.
 
 Layout NHWC = (B, T, W, C). The input velocity B x T x 3 enters as one channel over 3 width
 rows. Every block is conv -> LeakyReLU -> AdaIN(w); the same w feeds all 14 AdaINs. The two
@@ -68,7 +68,7 @@ the root's height (up to a constant) instead of its vertical velocity, and the y
 returns is its difference. An integrated velocity lets a small bias drift the body off the floor
 over a long curve; a height cannot drift.
 
-Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
+Init: convs and tconvs N(0, 0.02²), zero bias (DESIGN.md §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
 
 `impl="fast"` (default) computes the same function with less work (docs/PERFORMANCE.md):

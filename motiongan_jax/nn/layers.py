@@ -1,4 +1,4 @@
-"""Building blocks shared by G, D and the Latent Transform (spec §3.1, §3.2).
+"""Building blocks shared by G, D and the Latent Transform (docs/DESIGN.md §3.1, §3.2).
 
 Layout is NHWC = (B, T, W, C): time is axis 1, the joint-coordinate rows are axis 2.
 Parameters are stored so that they map 1:1 onto the PyTorch reference:
@@ -185,7 +185,7 @@ class SpectralNorm(nnx.Module):
 class Conv(nnx.Module):
     """Reflect-pad (kt//2 frames each side in time, `pad_w` rows in width), then a VALID conv.
 
-    Init: weight N(0, 0.02²), bias 0 (spec §3.1). `spectral_norm=True` divides the kernel by
+    Init: weight N(0, 0.02²), bias 0 (DESIGN.md §3.1). `spectral_norm=True` divides the kernel by
     σ from `SpectralNorm` on every call.
     """
 
@@ -311,7 +311,7 @@ def upsampled_tconv(x_BxTxWxC: jax.Array, taps: list[jax.Array], *, impl: str = 
 
 class ConvTranspose(nnx.Module):
     """PyTorch ConvTranspose2d kernel (kt, kw), stride (1, kw), no padding, then a crop of kt//2
-    frames from each end of time: T is kept, the width is multiplied by kw (spec §3.1).
+    frames from each end of time: T is kept, the width is multiplied by kw (DESIGN.md §3.1).
 
     Because the width stride equals the width kernel, each input column owns its kw output
     columns; with stride 1 in time the crop turns the transposed conv into a zero-padded
@@ -417,7 +417,7 @@ def torch_default_dense(in_features: int, out_features: int, *, rngs: nnx.Rngs) 
 class AdaIN(nnx.Module):
     """instance_norm(h) · s + b with s = A_s w + a_s (used directly, no 1+s), b = A_b w + a_b.
 
-    Init (spec §3.2): A_s, a_s PyTorch default U(±1/sqrt(w_dim)); A_b N(0, 0.02²), a_b 0.
+    Init (DESIGN.md §3.2): A_s, a_s PyTorch default U(±1/sqrt(w_dim)); A_b N(0, 0.02²), a_b 0.
     """
 
     def __init__(self, channels: int, w_dim: int, *, rngs: nnx.Rngs):
