@@ -144,7 +144,7 @@ def test_tconv_matches_loop_and_conv_transpose():
     got = tconv(jnp.asarray(x))
     chex.assert_shape(got, (2, 6, 6, 2))
     np.testing.assert_allclose(np.asarray(got), want, atol=1e-5)
-    # the spec's lax.conv_transpose formulation (§3.1)
+    # the same layer as lax.conv_transpose of the PyTorch weight, cropped (DESIGN.md §3.1)
     ref = jax.lax.conv_transpose(jnp.asarray(x), jnp.asarray(w_torch.transpose(2, 3, 1, 0)), (1, 3),
                                  "VALID", dimension_numbers=("NHWC", "HWIO", "NHWC"),
                                  transpose_kernel=True)[:, 2:-2] + jnp.array([0.5, -1.0])
@@ -263,7 +263,7 @@ def test_style_label_changes_output_at_init(gen27):
     fn, params, vel, z = gen27["fn16"], gen27["params"], gen27["vel16"], gen27["z"]
     (r0, p0), w0 = fn(params, vel, jnp.array([0, 0]), z)
     (r1, p1), w1 = fn(params, vel, jnp.array([1, 1]), z)
-    # The faithful init keeps w tiny (|w| ~ 1e-5, spec §3.2) ...
+    # The faithful init keeps w tiny (|w| ~ 1e-5, DESIGN.md §3.3) ...
     assert 1e-7 < float(jnp.mean(jnp.abs(w0))) < 1e-4
     # ... yet the label still moves the pose by a few percent (~4e-2 measured), 1e5 x float32
     # rounding: the 14 AdaINs compound it.
