@@ -27,16 +27,8 @@ and had no effect), motion and curve cover the same frames, and nothing touches 
 state: the parameters enter the jitted function as inputs and are never written. One code is
 fitted to all windows together (the reference fitted each window separately).
 
-What to expect from the search (measured, not assumed):
-- The loss over w is rough when windows are short. G's encoder ends at T/8 time samples with
-  width 1, so at the tiny config's T = 16 its last instance norms normalise 2 values per channel
-  (close to a sign function) and at the cpu config's T = 32, 4 values; the loss then changes by a
-  few per cent for steps in w far below the codes' spread, and a local optimiser stalls. Windows
-  of 64+ samples (`T=`, `--search-T`; G is convolutional in time) give a smooth loss in which a
-  known code is recovered to ~1e-7 (tests/test_analysis.py).
-- The pose term compares joints at equal times, so a target whose gait phase differs from what
-  G produces for that curve keeps a large loss whatever the style: the loss ranks styles only
-  when G's poses are good.
+Windows of 64+ samples (`T=`, `--search-T`) give the search a smooth loss; shorter ones a rough
+one (docs/RESULTS.md §11).
 """
 
 from __future__ import annotations

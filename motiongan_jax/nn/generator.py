@@ -29,44 +29,30 @@ works on exactly 3J rows and c_traj's kernel is kt × 3J. Joint k ≥ 1 still ow
 its position in the row layout gives it in the paper's grouping. For J = 27 the crop is the
 identity and the network is the paper's. J > 27 would need another width stage: rejected.
 
-Output prior (model.output_prior = "rest_and_curve", small configs only; off in the paper's G):
-the pose head adds the skeleton's rest pose (`rest_pose_R`, metres) and the root-velocity head
-adds the input curve velocity. The parameters are the same; G starts as a rest-pose skeleton
-gliding along the curve instead of a collapsed one standing still.
+Options of the small configs (the paper's G has none of them; docs/RESULTS.md §5-§10 says
+why each was added and what it changed). None adds parameters except the stride head.
 
-Curve frame (model.g_frame = "curve", small configs only; "world" is the paper's G): G works in
-the walker's own frame instead of the world's. Its input is each curve velocity seen from the
-heading of the previous one, u[t] = R(-θ[t-1]) v[t] (forward speed and turn, the same for every
-world rotation of the curve), and its outputs, root velocity and pose (with the rest pose prior,
-which faces +z), are turned by the smoothed heading θs[t] of the curve (`curves.smooth_heading`)
-before the world curve velocity is added. So rotating the curve rotates the motion exactly, and
-the network need not learn to turn the body to the path for every direction the rotation
-augmentation draws: with the world frame, the cpu config's bodies still faced a median 77
-degrees away from their path after 6,000 steps (docs/RESULTS.md §5). Same parameters.
-
-Exact bones (model.exact_bones, small configs only; the paper's G has only the bone loss): the
-pose head's bones keep their directions and take the skeleton's lengths, joint by joint from the
-root, p[b] = p[a] + L_ab (r[b] - r[a]) / |r[b] - r[a]| for raw rows r. A pose whose bones already
-have the right lengths is unchanged; bone lengths cannot drift, so neither D's class head nor
-its real/fake head can be answered with a stretched body.
-
-Gait phase (model.gait_phase, small configs; off in the paper's G): G's input, a curve resampled
-at equal arc length, is nearly constant on straight stretches and G is convolutional, so it has
-nothing to hang a gait cycle on and makes a phase-averaged body gliding forward. With the option
-G keeps a clock in walked distance: φ[t] = φ0 + 2π s[t] / λ(w), s[t] the distance walked along
-the curve, λ(w) = exp(stride_head(w)) metres the stride length of the style (one left and one
-right step), φ0 a phase offset (random per training sample, `step.sample_phase`; 0 unless given
-at generation). sin and cos of φ and 2φ (`gait_phase`) enter ec0_0 beside the velocity, join the
-skips e1 and e2 at their rates and the input of dc1_0 at full rate, so every decoder level can
-place the feet by phase. The clock depends on distance, not time, so it stays right under the
-FPS augmentation (a faster playback walks the same strides in fewer samples) and rotates with
-nothing. The stride head is trained to each style's stride length measured on the real training
-clips (`losses.stride_loss`), so cadence follows the style and the curve's speed.
-
-Root height (model.root_height, small configs; off in the paper's G): the root head's y channel is
-the root's height (up to a constant) instead of its vertical velocity, and the y velocity G
-returns is its difference. An integrated velocity lets a small bias drift the body off the floor
-over a long curve; a height cannot drift.
+* Output prior (model.output_prior = "rest_and_curve"): the pose head adds the skeleton's rest
+  pose (`rest_pose_R`, metres) and the root head the input curve velocity, so G starts as a rest
+  pose gliding along the curve instead of a collapsed body standing still.
+* Curve frame (model.g_frame = "curve"): G works in the walker's frame. Its input is each curve
+  velocity seen from the previous one's heading, u[t] = R(-θ[t-1]) v[t]; its outputs are turned
+  by the curve's smoothed heading (`curves.smooth_heading`) before the world curve velocity is
+  added. Rotating the curve rotates the motion exactly, so G need not learn every direction
+  the rotation augmentation draws.
+* Exact bones (model.exact_bones): the pose head's bones keep their directions and take the
+  skeleton's lengths, joint by joint from the root (`project_bones`), so no head of D can be
+  answered with a stretched body.
+* Gait phase (model.gait_phase): an equal-arc-length curve is nearly constant on straight
+  stretches, so a convolutional G has nothing to hang a gait cycle on. With the option G keeps
+  a clock in walked distance, φ[t] = φ0 + 2π s[t] / λ(w) (`walked_phase`), λ(w) the style's
+  stride length from `stride_head` (trained on strides measured on real clips,
+  `losses.stride_loss`), φ0 random per training sample (`step.sample_phase`), 0 at generation.
+  sin and cos of φ and 2φ (`gait_phase`) enter ec0_0, the skips e1 and e2 and dc1_0's input.
+  A clock in distance stays right under the FPS augmentation.
+* Root height (model.root_height): the root head's y channel is the root's height (up to a
+  constant), and the y velocity G returns is its difference, so a small bias cannot drift the
+  body off the floor along a long curve.
 
 Init: convs and tconvs N(0, 0.02²), zero bias (DESIGN.md §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
