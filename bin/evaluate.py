@@ -3,7 +3,7 @@
 
   python bin/evaluate.py --workdir runs/cpu --out runs/cpu/eval
                          [--data DATA_DIR] [--evaluator runs/cpu/evaluator.npz]
-                         [--cmu-curves ../shared/data/cmu] [--seeds 0,1,2] [--k 3] [--step N]
+                         [--cmu-curves DATA_DIR/cmu] [--seeds 0,1,2] [--k 3] [--step N]
 
 Generates for every (unseen curve × style) with K noise draws and each seed; unseen curves are
 the run's held-out real root paths (straight and turning), the root paths of the BVH files in
