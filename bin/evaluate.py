@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     X, y = codes.flat_samples
     p = analysis.pca(X, 2)
     viz.plot_style_pca(np.asarray(analysis.pca_transform(p, X)), np.asarray(y), style_names, out / "pca_w.png",
-                       centroids_Cx2=np.asarray(analysis.pca_transform(p, codes.centroids_CxW)),
+                       centroids_Cx2=np.asarray(analysis.pca_transform(p, codes.centroids_CxD)),
                        explained=np.asarray(p.explained_variance_ratio_K)[:2])
     print(f"wrote {out / 'report.md'}, report.json, confusion.png, pca_w.png")
     print(f"evaluator checksum {ev.checksum[:16]}…, {hashlib.sha256((out / 'report.json').read_bytes()).hexdigest()[:12]}")

@@ -207,8 +207,8 @@ class ClipArrays:
     clip_start_C: jax.Array  # first frame of each clip in the flat arrays
     clip_length_C: jax.Array
     clip_label_C: jax.Array
-    window_clip_W: jax.Array  # clip index of every training window
-    window_start_W: jax.Array  # start frame inside its clip
+    window_clip_M: jax.Array  # clip index of every training window
+    window_start_M: jax.Array  # start frame inside its clip
     phase_N: jax.Array  # gait phase of every frame, radians (clip_gait_phase)
     phase_valid_N: jax.Array  # whether that phase is measured (bool)
 
@@ -413,8 +413,8 @@ def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfi
         clip_start_C=jnp.asarray(starts, jnp.int32),
         clip_length_C=jnp.asarray(lengths, jnp.int32),
         clip_label_C=jnp.asarray(labels, jnp.int32),
-        window_clip_W=jnp.asarray(w_clip, jnp.int32),
-        window_start_W=jnp.asarray(w_start, jnp.int32),
+        window_clip_M=jnp.asarray(w_clip, jnp.int32),
+        window_start_M=jnp.asarray(w_start, jnp.int32),
         phase_N=jnp.asarray(np.concatenate([p for p, _ in phases])),
         phase_valid_N=jnp.asarray(np.concatenate([v for _, v in phases])),
     )
@@ -439,9 +439,9 @@ def make_sample_batch(cfg: DataConfig, batch_size: int):
 
     def sample_batch(arrays: ClipArrays, key: jax.Array, step) -> dict:
         k_idx, k_fps, k_rot, k_curve = jax.random.split(jax.random.fold_in(key, step), 4)
-        idx_B = epoch_indices(k_idx, step, arrays.window_clip_W.shape[0], batch_size)
-        clip_B = arrays.window_clip_W[idx_B]
-        s_B = arrays.window_start_W[idx_B]
+        idx_B = epoch_indices(k_idx, step, arrays.window_clip_M.shape[0], batch_size)
+        clip_B = arrays.window_clip_M[idx_B]
+        s_B = arrays.window_start_M[idx_B]
         n_B = arrays.clip_length_C[clip_B]
         base_B = arrays.clip_start_C[clip_B]
         # FPS augmentation (DESIGN.md §2.4): factor a, capped so the window fits in the clip.

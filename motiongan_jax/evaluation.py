@@ -399,7 +399,7 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
     fit = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_a)
     test = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_b)
     X, y = test.flat_samples
-    cents = np.asarray(fit.centroids_CxW)
+    cents = np.asarray(fit.centroids_CxD)
     nc_acc = metrics.nearest_centroid_accuracy(np.asarray(X), np.asarray(y), cents)
     ev_ratio = metrics.explained_variance(np.asarray(fit.flat_samples[0]))
     # a straight line of L samples at the held-out median spacing, for interpolation/arithmetic

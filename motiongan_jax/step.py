@@ -193,22 +193,22 @@ def latent_w(state: TrainState, labels_B: jax.Array, z_BxZ: jax.Array | None = N
 
 
 def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax.Array | None = None,
-                    z_BxZ: jax.Array | None = None, *, w_BxW: jax.Array | None = None,
+                    z_BxZ: jax.Array | None = None, *, w_BxD: jax.Array | None = None,
                     phase_offset_B: jax.Array | None = None):
     """(root_vel_BxTx3, pose_BxTxR) from G with the state's parameters.
 
-    Give either labels (and optionally z, default zeros) or a style code `w_BxW` directly. To run
+    Give either labels (and optionally z, default zeros) or a style code `w_BxD` directly. To run
     other parameters, pass `state.replace(g_params=...)`. A G with a gait phase takes its phase
     offsets (radians, B) from `phase_offset_B`, default 0.
     """
     g = generator(state)
-    if w_BxW is None:
+    if w_BxD is None:
         if labels_B is None:
-            raise ValueError("generator_apply needs labels_B or w_BxW")
+            raise ValueError("generator_apply needs labels_B or w_BxD")
         labels_B = jnp.asarray(labels_B, jnp.int32)
         z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
-        w_BxW = g.style(labels_B, z)
-    return g(curve_vel_BxTx3, w_BxW, phase_offset_B)
+        w_BxD = g.style(labels_B, z)
+    return g(curve_vel_BxTx3, w_BxD, phase_offset_B)
 
 
 def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:

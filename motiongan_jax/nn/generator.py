@@ -127,12 +127,12 @@ class StyledBlock(nnx.Module):
         self.conv = conv
         self.adain = AdaIN(channels, w_dim, rngs=rngs)
 
-    def activate(self, h_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
+    def activate(self, h_BxTxWxC: jax.Array, w_BxD: jax.Array) -> jax.Array:
         """LeakyReLU then AdaIN(w) of the conv's output."""
-        return self.adain(leaky_relu(h_BxTxWxC), w_BxW)
+        return self.adain(leaky_relu(h_BxTxWxC), w_BxD)
 
-    def __call__(self, x_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
-        return self.activate(self.conv(x_BxTxWxC), w_BxW)
+    def __call__(self, x_BxTxWxC: jax.Array, w_BxD: jax.Array) -> jax.Array:
+        return self.activate(self.conv(x_BxTxWxC), w_BxD)
 
 
 def _tile_w(x_BxTx1xC: jax.Array, width: int) -> jax.Array:
@@ -229,17 +229,17 @@ class Generator(nnx.Module):
         """The style code w (B x w_dim) of the Latent Transform."""
         return self.latent(labels_B, z_BxZ)
 
-    def log_stride(self, w_BxW: jax.Array) -> jax.Array:
+    def log_stride(self, w_BxD: jax.Array) -> jax.Array:
         """log of the stride length λ(w) in metres (B), for a G with a gait phase."""
         if self.stride_head is None:
             raise ValueError("this G has no gait phase (model.gait_phase)")
-        return STRIDE_GAIN * self.stride_head(w_BxW)[:, 0]
+        return STRIDE_GAIN * self.stride_head(w_BxD)[:, 0]
 
-    def adain_styles(self, w_BxW: jax.Array) -> dict[str, tuple[jax.Array, jax.Array]]:
+    def adain_styles(self, w_BxD: jax.Array) -> dict[str, tuple[jax.Array, jax.Array]]:
         """(scale, bias) of every AdaIN layer for a style code, keyed by block name."""
-        return {name: getattr(self, name).adain.style(w_BxW) for name in self.BLOCKS}
+        return {name: getattr(self, name).adain.style(w_BxD) for name in self.BLOCKS}
 
-    def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array,
+    def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array,
                      phase_offset_B: jax.Array | None = None) -> jax.Array:
         """B x T: the phase this G walks a curve with (`walked_phase` at its stride λ(w), offset
         default 0)."""
@@ -247,10 +247,10 @@ class Generator(nnx.Module):
         offset_B = jnp.zeros((b,), jnp.float32) if phase_offset_B is None else phase_offset_B
         # the stride is learned from measured strides alone (losses.stride_loss): the GAN's
         # gradient through sin(2π s / λ) is periodic in 1/λ and would only add noise
-        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxW)))
+        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxD)))
         return walked_phase(curve_vel_BxTx3, stride_B, offset_B)
 
-    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array, phase_offset_B: jax.Array | None = None,
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array, phase_offset_B: jax.Array | None = None,
                  phase_BxT: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
         """(root_vel_BxTx3, pose_BxTxR). A G with a gait phase walks with `self.walked_phase`
         (`phase_offset_B` radians, default 0), or with the given `phase_BxT` (radians: a real
@@ -258,7 +258,7 @@ class Generator(nnx.Module):
         t = curve_vel_BxTx3.shape[1]
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
-        w = w_BxW
+        w = w_BxD
 
         def block(name, x):
             with jax.named_scope(name):  # names the ops in profiles (bench/bench_profile.py)
@@ -282,7 +282,7 @@ class Generator(nnx.Module):
         phase_BxTx1xP = None
         if self.gait_phase:
             if phase_BxT is None:
-                phase_BxT = self.walked_phase(curve_vel_BxTx3, w_BxW, phase_offset_B)
+                phase_BxT = self.walked_phase(curve_vel_BxTx3, w_BxD, phase_offset_B)
             phase_BxTx1xP = gait_phase(phase_BxT)[:, :, None, :].astype(self.compute_dtype)
             x = jnp.concatenate([x, jnp.broadcast_to(phase_BxTx1xP, (b, t, 3, PHASE_CHANNELS))], -1)
         elif phase_offset_B is not None or phase_BxT is not None:

@@ -424,10 +424,10 @@ class AdaIN(nnx.Module):
         self.scale = torch_default_dense(w_dim, channels, rngs=rngs)
         self.shift = Dense(w_dim, channels, kernel_init=normal_init(0.02), bias_init=zeros_init, rngs=rngs)
 
-    def style(self, w_BxW: jax.Array) -> tuple[jax.Array, jax.Array]:
+    def style(self, w_BxD: jax.Array) -> tuple[jax.Array, jax.Array]:
         """(s_BxC, b_BxC) for a style code; the analysis tools read these."""
-        return self.scale(w_BxW), self.shift(w_BxW)
+        return self.scale(w_BxD), self.shift(w_BxD)
 
-    def __call__(self, h_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
-        s, b = self.style(w_BxW)
+    def __call__(self, h_BxTxWxC: jax.Array, w_BxD: jax.Array) -> jax.Array:
+        s, b = self.style(w_BxD)
         return modulated_instance_norm(h_BxTxWxC, s, b)
