@@ -3,24 +3,24 @@
 Layout NHWC = (B, T, W, C). The input velocity B x T x 3 enters as one channel over 3 width
 rows. Every block is conv -> LeakyReLU -> AdaIN(w); the same w feeds all 14 AdaINs. The two
 heads have neither. Skips are taken after AdaIN and tiled along the width, encoder first.
-The reference's unused `dc0_1` is not built.
+The reference's unused `dc0_1` is not built. c = `base_channels` (model.top), kt the time kernel.
 
-    ec0_0  conv kt×1           1 -> top        T     × 3
-    ec1_0  conv kt×3 /(2,3)  top -> 2top       T/2   × 1
-    ec1_1  conv kt×1        2top -> 2top       T/2   × 1   e1
-    ec2_0  conv kt×1 /(2,1) 2top -> 4top       T/4   × 1
-    ec2_1  conv kt×1        4top -> 4top       T/4   × 1   e2
-    ec3_0  conv kt×1 /(2,1) 4top -> 8top       T/8   × 1
-    ec3_1  conv kt×1        8top -> 8top       T/8   × 1
-    dc_bottom tconv kt×3    8top -> 8top       T/8   × 3,  up x2 in time
-    dc3_1  tconv kt×3       8top -> 8top       T/4   × 9
-    dc3_0  conv kt×3 (w-reflect 1) -> 4top     T/4   × 9   d2; [e2 tiled, d2], up
-    dc2_1  tconv kt×3       8top -> 4top       T/2   × 27
-    dc2_0  conv kt×3 (w-reflect 1) -> 2top     T/2   × 27  d1; keep J columns; [e1 tiled, d1], up
-    dc1_1  tconv kt×3       4top -> 2top       T     × 3J
-    dc1_0  conv kt×3 (w-reflect 1) -> top      T     × 3J  d0
-    c_traj conv kt×3J        top -> 3          T     × 1   -> root velocity B x T x 3
-    dc0_0  conv kt×1         top -> 1          T     × 3J  -> pose B x T x 3J
+    ec0_0  conv kt×1                 1 -> c    T     × 3
+    ec1_0  conv kt×3 /(2,3)          c -> 2c   T/2   × 1
+    ec1_1  conv kt×1                2c -> 2c   T/2   × 1   e1
+    ec2_0  conv kt×1 /(2,1)         2c -> 4c   T/4   × 1
+    ec2_1  conv kt×1                4c -> 4c   T/4   × 1   e2
+    ec3_0  conv kt×1 /(2,1)         4c -> 8c   T/8   × 1
+    ec3_1  conv kt×1                8c -> 8c   T/8   × 1
+    dc_bottom tconv kt×3            8c -> 8c   T/8   × 3,  up x2 in time
+    dc3_1  tconv kt×3               8c -> 8c   T/4   × 9
+    dc3_0  conv kt×3 (w-reflect 1)  8c -> 4c   T/4   × 9   d2; [e2 tiled, d2], up
+    dc2_1  tconv kt×3               8c -> 4c   T/2   × 27
+    dc2_0  conv kt×3 (w-reflect 1)  4c -> 2c   T/2   × 27  d1; keep J columns; [e1 tiled, d1], up
+    dc1_1  tconv kt×3               4c -> 2c   T     × 3J
+    dc1_0  conv kt×3 (w-reflect 1)  2c -> c    T     × 3J  d0
+    c_traj conv kt×3J                c -> 3    T     × 1   -> root velocity B x T x 3
+    dc0_0  conv kt×1                 c -> 1    T     × 3J  -> pose B x T x 3J
 
 Fewer than 27 joints (Bandai has 20). The decoder's width goes 1 -> 3 -> 9 -> 27, one column per
 joint slot at the 27-column stage. For J < 27 joints we keep the first J columns of d1 (after
@@ -146,10 +146,10 @@ class Generator(nnx.Module):
 
     def __init__(
         self,
-        num_joints: int = 27,
+        num_rel_joints: int = 27,
         *,
-        top: int = 64,
-        kw: int = 5,
+        base_channels: int = 64,
+        kt: int = 5,
         w_dim: int = 64,
         z_dim: int = 64,
         num_styles: int,
@@ -165,12 +165,12 @@ class Generator(nnx.Module):
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
     ):
-        if not 1 <= num_joints <= MAX_JOINTS:
-            raise ValueError(f"num_joints must be in 1..{MAX_JOINTS}, got {num_joints}")
-        if kw % 2 != 1:
-            raise ValueError(f"kw must be odd, got {kw}")
-        self.num_joints = num_joints
-        self.num_rows = 3 * num_joints
+        if not 1 <= num_rel_joints <= MAX_JOINTS:
+            raise ValueError(f"num_rel_joints must be in 1..{MAX_JOINTS}, got {num_rel_joints}")
+        if kt % 2 != 1:
+            raise ValueError(f"the time kernel kt must be odd, got {kt}")
+        self.num_rel_joints = num_rel_joints
+        self.num_rows = 3 * num_rel_joints
         self.impl = impl
         # activations' dtype; parameters, normalisation statistics and outputs stay float32
         self.compute_dtype = str(jnp.dtype(compute_dtype))
@@ -188,7 +188,7 @@ class Generator(nnx.Module):
         self.frame = frame
         if bones is not None:
             bones = tuple((int(a), int(b), float(length)) for a, b, length in bones)
-            if sorted(b for _, b, _ in bones) != list(range(1, num_joints + 1)) or any(a >= b for a, b, _ in bones):
+            if sorted(b for _, b, _ in bones) != list(range(1, num_rel_joints + 1)) or any(a >= b for a, b, _ in bones):
                 raise ValueError("bones must be (parent, child, length) with each joint 1..J a child once, "
                                  "parents before children")
         self.bones = bones  # static: part of the graph definition
@@ -197,13 +197,14 @@ class Generator(nnx.Module):
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
-            return StyledBlock(Conv(cin, cout, (kw, kwidth), stride, pad_w=pad_w, impl=impl, rngs=rngs),
+            return StyledBlock(Conv(cin, cout, (kt, kwidth), stride, pad_w=pad_w, impl=impl, rngs=rngs),
                                cout, w_dim, rngs=rngs)
 
         def tconv(cin, cout):
-            return StyledBlock(ConvTranspose(cin, cout, (kw, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
+            return StyledBlock(ConvTranspose(cin, cout, (kt, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
 
-        t1, t2, t4, t8 = top, 2 * top, 4 * top, 8 * top
+        c = base_channels
+        t1, t2, t4, t8 = c, 2 * c, 4 * c, 8 * c
         ph = PHASE_CHANNELS if self.gait_phase else 0
         self.ec0_0 = conv(1 + ph, t1)
         self.ec1_0 = conv(t1, t2, 3, (2, 3))
@@ -219,8 +220,8 @@ class Generator(nnx.Module):
         self.dc2_0 = conv(t4, t2, 3, pad_w=1)
         self.dc1_1 = tconv(t2 + ph + t2, t2)
         self.dc1_0 = conv(t2 + ph, t1, 3, pad_w=1)
-        self.c_traj = Conv(t1, 3, (kw, self.num_rows), impl=impl, rngs=rngs)
-        self.dc0_0 = Conv(t1, 1, (kw, 1), impl=impl, rngs=rngs)
+        self.c_traj = Conv(t1, 3, (kt, self.num_rows), impl=impl, rngs=rngs)
+        self.dc0_0 = Conv(t1, 1, (kt, 1), impl=impl, rngs=rngs)
         # log stride length (metres) of the style; zero init: 1 m strides until trained
         self.stride_head = (Dense(w_dim, 1, kernel_init=zeros_init, bias_init=zeros_init, rngs=rngs)
                             if self.gait_phase else None)
@@ -307,7 +308,7 @@ class Generator(nnx.Module):
         x = up_block("dc3_1", block("dc_bottom", x))
         d2 = block("dc3_0", x)
         x = up_block("dc2_1", d2, with_phase(e2, 4))
-        d1 = block("dc2_0", x)[:, :, : self.num_joints]
+        d1 = block("dc2_0", x)[:, :, : self.num_rel_joints]
         x = up_block("dc1_1", d1, with_phase(e1, 2))
         d0 = block("dc1_0", with_phase(x, 1))
 
