@@ -7,7 +7,7 @@ straightforward layers call it) and `impl="fast"` (nn/conv.py). Prints medians, 
 per multiply-add) and the load average; the machine is shared, so compare rows taken together.
 
 The tconv rows are the layers as `ConvTranspose.__call__` runs them (a zero-padded correlation
-with kw·out channels); "dc1_1 poly" etc. are the polyphase form of `ConvTranspose.upsampled`
+with kwidth·out channels); "dc1_1 poly" etc. are the polyphase form of `ConvTranspose.upsampled`
 (x at half the time resolution, (kt//2 + 2) taps, [even | odd] channels) on the skip-free part.
 
   JAX_PLATFORMS=cpu python bench/bench_conv.py [--layers dc1_0,dc1_1] [--impl xla,fast] [--batch 24]
@@ -25,7 +25,7 @@ import jax  # noqa: E402
 from bench.timing import load, median_time  # noqa: E402
 from motiongan_jax.nn.conv import conv2d  # noqa: E402
 
-# name: (T, W, C_in, C_out, kernel (kt, kw), stride, padding inside the conv) of the padded input
+# name: (T, W, C_in, C_out, kernel (kt, kwidth), stride, padding inside the conv) of the padded input
 # the layer hands to the convolution (reflect padding already applied for convs).
 LAYERS = {
     "dc1_0": (132, 83, 128, 64, (5, 3), (1, 1), ((0, 0), (0, 0))),
@@ -54,12 +54,12 @@ def main():
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus, batch {args.batch}; {load()}")
     print(f"  {'layer':13s} {'impl':5s} {'fwd s':>7s} {'GF/s':>5s} {'dx s':>7s} {'GF/s':>5s} {'dW s':>7s} {'GF/s':>5s}")
     for name in args.layers.split(","):
-        t, w, cin, cout, (kt, kw), stride, padding = LAYERS[name]
+        t, w, cin, cout, (kt, kwidth), stride, padding = LAYERS[name]
         x = jax.random.normal(jax.random.key(0), (args.batch, t, w, cin))
-        k = 0.02 * jax.random.normal(jax.random.key(1), (kt, kw, cin, cout))
+        k = 0.02 * jax.random.normal(jax.random.key(1), (kt, kwidth, cin, cout))
         y = jax.eval_shape(lambda a, b: conv2d(a, b, stride, padding, impl="xla"), x, k)
         dy = jax.random.normal(jax.random.key(2), y.shape)
-        flop = 2 * y.size * kt * kw * cin
+        flop = 2 * y.size * kt * kwidth * cin
         for impl in args.impl.split(","):
             def f(a, b, impl=impl):
                 return conv2d(a, b, stride, padding, impl=impl)

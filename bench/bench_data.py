@@ -1,11 +1,11 @@
 #!/usr/bin/env python
 """Data-pipeline benchmark (run by hand, never in CI). Prints medians.
 
-1. Parse + FK + cache every BVH of a directory (default: ../shared/data/bandai/dataset-2), cold
-   (empty cache) and warm (cache hits).
+1. Parse + FK + cache every BVH of a directory (default: bandai/dataset-2 under
+   $MOTIONGAN_SHARED_DATA, README), cold (empty cache) and warm (cache hits).
 2. Batches of 24 paper-size windows (1024 frames at step 8 -> T 128, FPS x0.5/1/1.5 and rotation
    augmentation, noisy spline curves) from cached arrays. Reference PyTorch loader on this machine
-   kind: 0.58-0.86 s per batch (spec §6 item 9).
+   kind: 0.58-0.86 s per batch (docs/PERFORMANCE.md).
 
   JAX_PLATFORMS=cpu python bench/bench_data.py [--data DIR] [--repeats 3]
 """

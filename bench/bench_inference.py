@@ -9,7 +9,7 @@ T 128 (one training window), T 1024, and a 2-minute walk in one call (15 samples
 positions + floor contact), the library call behind bin/generate.py.
 
 Reference PyTorch on this machine kind (2 threads, eval, no_grad, latent transform included):
-84 ms at T 128, 0.62 s at T 1024 (spec §7). Goals of the speed issue: <= 30 ms and <= 0.2 s.
+84 ms at T 128, 0.62 s at T 1024; the goals are <= 30 ms and <= 0.2 s (docs/PERFORMANCE.md).
 
   JAX_PLATFORMS=cpu python bench/bench_inference.py [--impl fast,xla] [--lengths 128,1024,1800] [--repeats 7]
 """

@@ -108,7 +108,7 @@ def run(args, log=print) -> dict:
     two = (lambda a: np.asarray(a)[:, :2] if np.asarray(a).shape[1] >= 2 else
            np.pad(np.asarray(a), ((0, 0), (0, 2 - np.asarray(a).shape[1]))))
     evr = np.asarray(p.explained_variance_ratio_K)
-    dist = np.asarray(A.pairwise_distances(codes.centroids_CxW))
+    dist = np.asarray(A.pairwise_distances(codes.centroids_CxD))
     nearest = A.nearest_styles(dist, names, k=min(3, C - 1))
 
     report = {
@@ -122,9 +122,9 @@ def run(args, log=print) -> dict:
         "distance": {"metric": "Euclidean between centroids (mean of the K codes)", "matrix": dist,
                      "mean_offdiagonal": float(dist[~np.eye(C, dtype=bool)].mean()) if C > 1 else 0.0,
                      "mean_within_style_spread": float(np.mean(np.linalg.norm(
-                         np.asarray(codes.samples_CxKxW - codes.centroids_CxW[:, None]), axis=-1)))},
+                         np.asarray(codes.samples_CxKxD - codes.centroids_CxD[:, None]), axis=-1)))},
         "nearest": nearest,
-        "centroids": np.asarray(codes.centroids_CxW), "w_zero": np.asarray(codes.zero_CxW),
+        "centroids": np.asarray(codes.centroids_CxD), "w_zero": np.asarray(codes.zero_CxD),
     }
     gait = A.gait_parameters(meta, cfg)
     if gait is not None and C >= 3:
@@ -144,12 +144,12 @@ def run(args, log=print) -> dict:
                                 steps=args.search_steps, lr=args.search_lr, key=k_search,
                                 length_unit=cfg.model.length_unit)
         res = found["result"]
-        marks[f"search: {Path(args.search).stem}"] = tuple(two(A.pca_transform(p, res.w_W[None]))[0])
-        rv, pose = A.reconstruct(state, target, res.w_W)
+        marks[f"search: {Path(args.search).stem}"] = tuple(two(A.pca_transform(p, res.w_D[None]))[0])
+        rv, pose = A.reconstruct(state, target, res.w_D)
         spacing = target.spacing_m
         height = float(np.mean(np.asarray(target.root_NxTx3[:, :, 1])))
         curve_pts = _search_curve(args.search_curve, spacing, cfg.data.window_T)
-        walk = A.generate_along(state, layout, res.w_W, curve_pts, spacing_m=spacing, start_height_m=height)
+        walk = A.generate_along(state, layout, res.w_D, curve_pts, spacing_m=spacing, start_height_m=height)
         sample_rate = float(meta["fps"]) / cfg.data.frame_step
         stem = Path(args.search).stem
         true_style = stem.split("_", 1)[0] if stem.split("_", 1)[0] in names else None
@@ -162,7 +162,7 @@ def run(args, log=print) -> dict:
             "screen_loss": found["screen"],
             "starts": [{"start": n, "initial_loss": float(a), "final_loss": float(b)}
                        for n, a, b in zip(res.start_names, res.initial_loss_S, res.final_loss_S)],
-            "best_start": res.start_names[res.best_start], "final_loss": res.loss, "w": res.w_W,
+            "best_start": res.start_names[res.best_start], "final_loss": res.loss, "w": res.w_D,
             "nearest": found["nearest"], "nearest_in_spread_units": found["nearest_scaled"],
             "file_name_style": true_style,
             "loss_history_best": res.history_HxS[:, res.best_start], "history_every": res.record_every,
@@ -170,11 +170,11 @@ def run(args, log=print) -> dict:
                      "start_height_m": height},
         }
         if true_style is not None:
-            order = [n for n, _ in A.nearest_to(res.w_W, codes, k=C)]
+            order = [n for n, _ in A.nearest_to(res.w_D, codes, k=C)]
             search["file_name_style_rank"] = order.index(true_style) + 1
         _write_json(out / "search.json", search)
         with atomic.atomic_path(out / "search.npz") as tmp, open(tmp, "wb") as fh:
-            np.savez(fh, w=res.w_W, positions=walk["positions_TxJx3"], root=walk["root_Tx3"],
+            np.savez(fh, w=res.w_D, positions=walk["positions_TxJx3"], root=walk["root_Tx3"],
                      pose=walk["pose_TxR"], curve=walk["curve_Tx3"], joint_names=np.array(layout.joint_names),
                      parents=np.array(layout.parents, np.int32), fps=np.float64(sample_rate),
                      target_root=np.asarray(target.root_NxTx3), target_pose=np.asarray(target.pose_NxTxR),
@@ -184,8 +184,8 @@ def run(args, log=print) -> dict:
                             "final_loss": res.loss, "nearest": found["nearest"]}
 
     viz.plot_style_pca(two(pts), np.asarray(labels), names, out / "pca.png",
-                       centroids_Cx2=two(A.pca_transform(p, codes.centroids_CxW)),
-                       zero_Cx2=two(A.pca_transform(p, codes.zero_CxW)), explained=evr[:2], marks=marks,
+                       centroids_Cx2=two(A.pca_transform(p, codes.centroids_CxD)),
+                       zero_Cx2=two(A.pca_transform(p, codes.zero_CxD)), explained=evr[:2], marks=marks,
                        title=f"Style codes w, {C} styles x {args.k} (step {int(state.step)})")
     viz.plot_distance_heatmap(dist, names, out / "heatmap.png")
     atomic.write_text(out / "nearest.md", A.nearest_markdown(nearest))

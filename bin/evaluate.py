@@ -1,9 +1,9 @@
 #!/usr/bin/env python
-"""Evaluate a trained run with the project's protocol (docs: ../shared/spec/evaluation.md).
+"""Evaluate a trained run with the project's protocol (docs/DESIGN.md §7).
 
   python bin/evaluate.py --workdir runs/cpu --out runs/cpu/eval
                          [--data DATA_DIR] [--evaluator runs/cpu/evaluator.npz]
-                         [--cmu-curves ../shared/data/cmu] [--seeds 0,1,2] [--k 3] [--step N]
+                         [--cmu-curves DATA_DIR/cmu] [--seeds 0,1,2] [--k 3] [--step N]
 
 Generates for every (unseen curve × style) with K noise draws and each seed; unseen curves are
 the run's held-out real root paths (straight and turning), the root paths of the BVH files in
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
     X, y = codes.flat_samples
     p = analysis.pca(X, 2)
     viz.plot_style_pca(np.asarray(analysis.pca_transform(p, X)), np.asarray(y), style_names, out / "pca_w.png",
-                       centroids_Cx2=np.asarray(analysis.pca_transform(p, codes.centroids_CxW)),
+                       centroids_Cx2=np.asarray(analysis.pca_transform(p, codes.centroids_CxD)),
                        explained=np.asarray(p.explained_variance_ratio_K)[:2])
     print(f"wrote {out / 'report.md'}, report.json, confusion.png, pca_w.png")
     print(f"evaluator checksum {ev.checksum[:16]}…, {hashlib.sha256((out / 'report.json').read_bytes()).hexdigest()[:12]}")

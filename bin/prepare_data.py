@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from motiongan_jax.bvh import BVHError  # noqa: E402
 from motiongan_jax.data import DataError  # noqa: E402
-from motiongan_jax.export import export_positions  # noqa: E402
+from motiongan_jax.dataset_export import export_positions  # noqa: E402
 
 
 def main(argv=None) -> int:

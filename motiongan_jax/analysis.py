@@ -1,6 +1,6 @@
 """The learned style space: codes, PCA, distances, blending, a linear probe, and style search.
 
-Spec §5.8 (analysis) and §5.7 (style search), with the reference's bugs (§6 item 23) fixed.
+docs/DESIGN.md §5.2 (analysis) and §5.3 (style search), with the reference's bugs fixed (§6).
 All numerics are jnp; plots live in `viz.py`, files are written by `bin/analyze.py`.
 
 Style codes. w = LT(label, z): `style_codes` gives, for every label, w at z = 0 (what the
@@ -27,16 +27,8 @@ and had no effect), motion and curve cover the same frames, and nothing touches 
 state: the parameters enter the jitted function as inputs and are never written. One code is
 fitted to all windows together (the reference fitted each window separately).
 
-What to expect from the search (measured, not assumed):
-- The loss over w is rough when windows are short. G's encoder ends at T/8 time samples with
-  width 1, so at the tiny config's T = 16 its last instance norms normalise 2 values per channel
-  (close to a sign function) and at the cpu config's T = 32, 4 values; the loss then changes by a
-  few per cent for steps in w far below the codes' spread, and a local optimiser stalls. Windows
-  of 64+ samples (`T=`, `--search-T`; G is convolutional in time) give a smooth loss in which a
-  known code is recovered to ~1e-7 (tests/test_analysis.py).
-- The pose term compares joints at equal times, so a target whose gait phase differs from what
-  G produces for that curve keeps a large loss whatever the style: the loss ranks styles only
-  when G's poses are good.
+Windows of 64+ samples (`T=`, `--search-T`) give the search a smooth loss; shorter ones a rough
+one (docs/RESULTS.md §11).
 """
 
 from __future__ import annotations
@@ -64,7 +56,7 @@ class AnalysisError(ValueError):
     """A problem with analysis inputs (a motion that does not fit the model, a short clip, ...)."""
 
 
-_apply_w = jax.jit(lambda gstate, vel, w: step_lib.generator_apply(gstate, vel, w_BxW=w))
+_apply_w = jax.jit(lambda gstate, vel, w: step_lib.generator_apply(gstate, vel, w_BxD=w))
 
 
 def _g_only(state):
@@ -72,10 +64,10 @@ def _g_only(state):
     return state.replace(d_params=None, d_sn_state=None, opt_g_state=None, opt_d_state=None)
 
 
-def apply_code(state, curve_vel_BxTx3, w_BxW):
+def apply_code(state, curve_vel_BxTx3, w_BxD):
     """(root_vel, pose) of G for style codes w (jitted; compiled once per shape: the inputs are
     taken through numpy so that arrays from any computation share one cache entry)."""
-    return _apply_w(_g_only(state), np.asarray(curve_vel_BxTx3, np.float32), np.asarray(w_BxW, np.float32))
+    return _apply_w(_g_only(state), np.asarray(curve_vel_BxTx3, np.float32), np.asarray(w_BxD, np.float32))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -86,18 +78,18 @@ def apply_code(state, curve_vel_BxTx3, w_BxW):
 @dataclasses.dataclass(frozen=True)
 class StyleCodes:
     style_names: tuple[str, ...]
-    zero_CxW: jax.Array  # w = LT(label, z = 0)
-    samples_CxKxW: jax.Array  # w = LT(label, z_k), z_k ~ N(0, I) (zeros under use_z == "zeros")
+    zero_CxD: jax.Array  # w = LT(label, z = 0)
+    samples_CxKxD: jax.Array  # w = LT(label, z_k), z_k ~ N(0, I) (zeros under use_z == "zeros")
 
     @property
-    def centroids_CxW(self) -> jax.Array:
-        return jnp.mean(self.samples_CxKxW, axis=1)
+    def centroids_CxD(self) -> jax.Array:
+        return jnp.mean(self.samples_CxKxD, axis=1)
 
     @property
     def flat_samples(self) -> tuple[jax.Array, jax.Array]:
-        """(samples (C·K) x W, their labels (C·K,))."""
-        C, K, W = self.samples_CxKxW.shape
-        return self.samples_CxKxW.reshape(C * K, W), jnp.repeat(jnp.arange(C, dtype=jnp.int32), K)
+        """(samples (C·K) x D, their labels (C·K,))."""
+        C, K, D = self.samples_CxKxD.shape
+        return self.samples_CxKxD.reshape(C * K, D), jnp.repeat(jnp.arange(C, dtype=jnp.int32), K)
 
 
 _latent_w = jax.jit(step_lib.latent_w)
@@ -208,13 +200,13 @@ def nearest_markdown(nearest: list[dict], title: str = "Nearest styles (Euclidea
 
 
 def interpolate(w_a, w_b, alpha):
-    """(1 - α) w_a + α w_b. α may be an array (e.g. linspace): the result gets its shape + (W,)."""
+    """(1 - α) w_a + α w_b. α may be an array (e.g. linspace): the result gets its shape + (D,)."""
     a = jnp.asarray(alpha, jnp.float32)[..., None]
     return (1.0 - a) * jnp.asarray(w_a) + a * jnp.asarray(w_b)
 
 
 def mix(ws, weights, *, normalize: bool = False):
-    """Σ_i weights_i ws_i over the first axis of ws (N x ... x W); normalize divides the weights by
+    """Σ_i weights_i ws_i over the first axis of ws (N x ... x D); normalize divides the weights by
     their sum first. Weights summing to 1 make it a blend (the same output as blending AdaINs)."""
     ws = jnp.asarray(ws, jnp.float32)
     wts = jnp.asarray(weights, jnp.float32)
@@ -238,9 +230,9 @@ def arithmetic(terms: Sequence[tuple]):
     return total
 
 
-def adain_styles(state, w_BxW) -> dict[str, tuple[jax.Array, jax.Array]]:
+def adain_styles(state, w_BxD) -> dict[str, tuple[jax.Array, jax.Array]]:
     """(s, b) of every AdaIN layer of G for the codes w, keyed by block name."""
-    return step_lib.generator(state).adain_styles(jnp.asarray(w_BxW, jnp.float32))
+    return step_lib.generator(state).adain_styles(jnp.asarray(w_BxD, jnp.float32))
 
 
 def blend_adain(styles: Sequence[dict], weights) -> dict[str, tuple[jax.Array, jax.Array]]:
@@ -259,15 +251,15 @@ class _FixedAdaIN(AdaIN):
         self.s_BxC = nnx.data(s_BxC)
         self.b_BxC = nnx.data(b_BxC)
 
-    def style(self, w_BxW):
-        del w_BxW
+    def style(self, w_BxD):
+        del w_BxD
         return self.s_BxC, self.b_BxC
 
 
-def generator_apply_adain(state, curve_vel_BxTx3, adain: dict, w_BxW=None):
+def generator_apply_adain(state, curve_vel_BxTx3, adain: dict, w_BxD=None):
     """(root_vel, pose) from G with the given (s_BxC, b_BxC) in the named AdaIN layers.
 
-    Layers not in `adain` use `w_BxW` (required then). Works on a private copy of G: the AdaIN
+    Layers not in `adain` use `w_BxD` (required then). Works on a private copy of G: the AdaIN
     modules of that copy are swapped for fixed ones (nn/generator.py has no override hook).
     """
     g = step_lib.generator(state)
@@ -275,15 +267,15 @@ def generator_apply_adain(state, curve_vel_BxTx3, adain: dict, w_BxW=None):
     if unknown:
         raise ValueError(f"unknown AdaIN block(s) {sorted(unknown)}; G has {g.BLOCKS}")
     missing = [n for n in g.BLOCKS if n not in adain]
-    if missing and w_BxW is None:
-        raise ValueError(f"no (s, b) for {missing} and no w_BxW to compute them")
+    if missing and w_BxD is None:
+        raise ValueError(f"no (s, b) for {missing} and no w_BxD to compute them")
     B = curve_vel_BxTx3.shape[0]
     for name, (s, b) in adain.items():
         block = getattr(g, name)
         C = block.adain.scale.kernel.shape[-1]
         chex.assert_shape([s, b], (B, C))
         block.adain = _FixedAdaIN(jnp.asarray(s, jnp.float32), jnp.asarray(b, jnp.float32))
-    w = jnp.zeros((B, g.w_dim), jnp.float32) if w_BxW is None else jnp.asarray(w_BxW, jnp.float32)
+    w = jnp.zeros((B, g.w_dim), jnp.float32) if w_BxD is None else jnp.asarray(w_BxD, jnp.float32)
     return g(curve_vel_BxTx3, w)
 
 
@@ -427,7 +419,7 @@ def probe_report(codes: StyleCodes, gait: dict) -> dict:
     Yn = (Y - Y.mean(axis=0)) / np.where(sd > 0, sd, 1.0)
     X_s, labels = codes.flat_samples
     C = len(codes.style_names)
-    per_style = linear_probe(codes.centroids_CxW, Yn, groups_N=np.arange(C))
+    per_style = linear_probe(codes.centroids_CxD, Yn, groups_N=np.arange(C))
     per_sample = linear_probe(X_s, Yn[np.asarray(labels)], groups_N=np.asarray(labels))
     names = gait["param_names"]
 
@@ -609,15 +601,15 @@ def reconstruction_loss(root_vel_NxTx3, pose_NxTxR, target: MotionWindows, *, ve
 
 
 @functools.partial(jax.jit, static_argnames=("steps", "warmup", "record_every"))
-def _search_scan(gstate, vel_NxTx3, u_NxTx3, pose_NxTxR, u0_SxW, center_W, scale_W, lr, vel_weight,
+def _search_scan(gstate, vel_NxTx3, u_NxTx3, pose_NxTxR, u0_SxD, center_D, scale_D, lr, vel_weight,
                  length_unit, *, steps: int, warmup: int, record_every: int):
-    S, N = u0_SxW.shape[0], vel_NxTx3.shape[0]
+    S, N = u0_SxD.shape[0], vel_NxTx3.shape[0]
     tx = optax.adam(search_schedule(lr, steps, warmup), b1=0.5, b2=0.999)
     vel, u, pose_t = (jnp.tile(a, (S, 1, 1)) for a in (vel_NxTx3, u_NxTx3, pose_NxTxR))
 
-    def losses_S(p_SxW):
-        w = center_W + scale_W * p_SxW
-        rv, pose = step_lib.generator_apply(gstate, vel, w_BxW=jnp.repeat(w, N, axis=0))
+    def losses_S(p_SxD):
+        w = center_D + scale_D * p_SxD
+        rv, pose = step_lib.generator_apply(gstate, vel, w_BxD=jnp.repeat(w, N, axis=0))
         return jnp.mean(_window_losses(rv, pose, u, pose_t, vel_weight, length_unit).reshape(S, N), axis=1)
 
     def total(p):
@@ -632,17 +624,17 @@ def _search_scan(gstate, vel_NxTx3, u_NxTx3, pose_NxTxR, u0_SxW, center_W, scale
         updates, opt = tx.update(grad, opt, p)
         return (optax.apply_updates(p, updates), opt), l_S
 
-    (p, _), hist = jax.lax.scan(body, (u0_SxW, tx.init(u0_SxW)), None, length=steps)
-    return center_W + scale_W * p, losses_S(p), hist[::record_every]
+    (p, _), hist = jax.lax.scan(body, (u0_SxD, tx.init(u0_SxD)), None, length=steps)
+    return center_D + scale_D * p, losses_S(p), hist[::record_every]
 
 
 @dataclasses.dataclass(frozen=True)
 class SearchResult:
-    w_W: np.ndarray  # the best start's code
+    w_D: np.ndarray  # the best start's code
     loss: float  # its final reconstruction loss
     best_start: int
     start_names: tuple[str, ...]
-    w_SxW: np.ndarray  # every start's final code
+    w_SxD: np.ndarray  # every start's final code
     initial_loss_S: np.ndarray
     final_loss_S: np.ndarray
     history_HxS: np.ndarray  # loss before update 0, record_every, 2·record_every, ...
@@ -660,9 +652,9 @@ def code_scale(codes: StyleCodes) -> tuple[jax.Array, jax.Array]:
 def search_starts(codes: StyleCodes, num_random: int = 4, key: jax.Array | None = None
                   ) -> tuple[jax.Array, tuple[str, ...]]:
     """Every style centroid, plus num_random draws N(centre, spread²) of `code_scale` (from `key`,
-    default key 1). Returns (starts S x W, their names)."""
+    default key 1). Returns (starts S x D, their names)."""
     names = [f"centroid:{s}" for s in codes.style_names]
-    starts = [codes.centroids_CxW]
+    starts = [codes.centroids_CxD]
     if num_random > 0:
         centre, spread = code_scale(codes)
         eps = jax.random.normal(jax.random.key(1) if key is None else key, (num_random, centre.shape[0]))
@@ -671,8 +663,8 @@ def search_starts(codes: StyleCodes, num_random: int = 4, key: jax.Array | None 
     return jnp.concatenate(starts, axis=0).astype(jnp.float32), tuple(names)
 
 
-def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence[str] | None = None, *,
-                 center_W=None, scale_W=None, steps: int = 200, lr: float = 0.1, warmup: int = 20,
+def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence[str] | None = None, *,
+                 center_D=None, scale_D=None, steps: int = 200, lr: float = 0.1, warmup: int = 20,
                  vel_weight: float = 0.01, length_unit: float = 0.056444,
                  record_every: int = 10) -> SearchResult:
     """Fit one code w to all of the target's windows, from every start at once (one jitted scan).
@@ -682,17 +674,17 @@ def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence
     and 1: plain w). Loss: `reconstruction_loss`, averaged over windows. The state is read, never
     written; D is not involved.
     """
-    w0 = jnp.asarray(starts_SxW, jnp.float32)
+    w0 = jnp.asarray(starts_SxD, jnp.float32)
     chex.assert_rank(w0, 2)
-    S, W = w0.shape
+    S, D = w0.shape
     names = tuple(start_names) if start_names is not None else tuple(f"start:{i}" for i in range(S))
     if len(names) != S:
         raise ValueError(f"{S} starts but {len(names)} names")
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
-    center = jnp.zeros((W,), jnp.float32) if center_W is None else jnp.asarray(center_W, jnp.float32)
-    scale = jnp.ones((W,), jnp.float32) if scale_W is None else jnp.asarray(scale_W, jnp.float32)
-    chex.assert_shape([center, scale], (W,))
+    center = jnp.zeros((D,), jnp.float32) if center_D is None else jnp.asarray(center_D, jnp.float32)
+    scale = jnp.ones((D,), jnp.float32) if scale_D is None else jnp.asarray(scale_D, jnp.float32)
+    chex.assert_shape([center, scale], (D,))
     # numpy in: one jit cache entry whatever device computation made the inputs
     host = lambda x: np.asarray(x, np.float32)  # noqa: E731
     w, final, hist = _search_scan(_g_only(state), host(curves.velocity(target.curve_NxTx3)),
@@ -707,13 +699,13 @@ def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence
     return SearchResult(w[best], float(final[best]), best, names, w, hist[0], final, hist, int(record_every))
 
 
-def start_losses(state, target: MotionWindows, w_SxW, *, vel_weight: float = 0.01,
+def start_losses(state, target: MotionWindows, w_SxD, *, vel_weight: float = 0.01,
                  length_unit: float = 0.056444) -> np.ndarray:
     """The reconstruction loss of each code as it is (G forward only, one start at a time, with
     the same compiled forward as `reconstruct`)."""
     return np.array([float(jnp.mean(reconstruction_loss(*reconstruct(state, target, w), target,
                                                          vel_weight=vel_weight, length_unit=length_unit)))
-                     for w in jnp.asarray(w_SxW, jnp.float32)])
+                     for w in jnp.asarray(w_SxD, jnp.float32)])
 
 
 def search_motion(state, codes: StyleCodes, target: MotionWindows, *, num_random: int = 4,
@@ -733,18 +725,18 @@ def search_motion(state, codes: StyleCodes, target: MotionWindows, *, num_random
     if keep is not None:
         order = order[: max(1, int(keep))]
     centre, spread = code_scale(codes)
-    res = style_search(state, target, starts[order], [names[i] for i in order], center_W=centre,
-                       scale_W=spread, steps=steps, lr=lr, warmup=warmup, vel_weight=vel_weight,
+    res = style_search(state, target, starts[order], [names[i] for i in order], center_D=centre,
+                       scale_D=spread, steps=steps, lr=lr, warmup=warmup, vel_weight=vel_weight,
                        length_unit=length_unit)
-    near = nearest_to(res.w_W, codes, k=nearest)
+    near = nearest_to(res.w_D, codes, k=nearest)
     scale = float(jnp.sqrt(jnp.mean(jnp.square(spread))))
     return {"result": res, "screen": {n: float(v) for n, v in zip(names, screen)}, "nearest": near,
             "nearest_scaled": [[n, d / scale] for n, d in near]}
 
 
-def nearest_to(w_W, codes: StyleCodes, k: int = 3) -> list[list]:
+def nearest_to(w_D, codes: StyleCodes, k: int = 3) -> list[list]:
     """The k labelled styles whose centroids are nearest to w: [[name, distance], ...]."""
-    d = np.asarray(jnp.linalg.norm(codes.centroids_CxW - jnp.asarray(w_W)[None], axis=-1))
+    d = np.asarray(jnp.linalg.norm(codes.centroids_CxD - jnp.asarray(w_D)[None], axis=-1))
     order = np.argsort(d, kind="stable")[:k]
     return [[codes.style_names[i], float(d[i])] for i in order]
 
@@ -754,15 +746,15 @@ def nearest_to(w_W, codes: StyleCodes, k: int = 3) -> list[list]:
 # ---------------------------------------------------------------------------------------------
 
 
-def reconstruct(state, target: MotionWindows, w_W):
+def reconstruct(state, target: MotionWindows, w_D):
     """G's (root_vel, pose) for every window of the target with one code w."""
     N = target.curve_NxTx3.shape[0]
     # numpy in: the same jit cache entry whether w comes from numpy or from a device computation
-    w = np.broadcast_to(np.asarray(w_W, np.float32), (N, np.shape(w_W)[-1]))
+    w = np.broadcast_to(np.asarray(w_D, np.float32), (N, np.shape(w_D)[-1]))
     return apply_code(state, curves.velocity(target.curve_NxTx3), w)
 
 
-def generate_along(state, layout: RowLayout, w_W, curve_xz_Px2, *, spacing_m: float,
+def generate_along(state, layout: RowLayout, w_D, curve_xz_Px2, *, spacing_m: float,
                    start_height_m: float) -> dict:
     """Walk with code w along a floor curve: the curve is resampled every `spacing_m` metres (the
     speed, e.g. the searched clip's `spacing_m`), cut to a multiple of 8 samples, and run through
@@ -775,7 +767,7 @@ def generate_along(state, layout: RowLayout, w_W, curve_xz_Px2, *, spacing_m: fl
                             f"needs at least 16 (draw a longer curve)")
     xz = xz[:T]
     curve = np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], axis=-1).astype(np.float32)
-    root_vel, pose = apply_code(state, curves.velocity(jnp.asarray(curve)[None]), np.reshape(w_W, (1, -1)))
+    root_vel, pose = apply_code(state, curves.velocity(jnp.asarray(curve)[None]), np.reshape(w_D, (1, -1)))
     start = jnp.asarray([[curve[0, 0], start_height_m, curve[0, 2]]], jnp.float32)
     root = curves.integrate(start, root_vel)[0]
     positions = from_rows(root, pose[0], layout)

@@ -7,7 +7,7 @@ Training hot path (pure jnp, jit-able, batched): `window_curves`. Whole clips an
 `load_curve_file`, `curve_from_root_positions`, `shape_curve`, `check_curve`.
 Network-side helpers (CONTRACTS.md): `velocity`, `integrate`, and `rotate_y` for augmentation.
 
-Spline (spec §2.6, with the reference's bugs fixed):
+Spline (docs/DESIGN.md §2.3, with the reference's bugs fixed):
 - knots at frames 0, I, 2I, ... < n-1 plus a final knot at frame n-1 holding r[n-1]. The
   reference gave the final knot the value r[n-2] (off by one) and crashed when n-1 was a
   multiple of I (duplicate knot); neither happens here.
@@ -240,7 +240,7 @@ _eval_spline_jit = jax.jit(eval_spline, static_argnames="interval")
 
 def velocity(x_BxTxD):
     """v[t] = x[t] - x[t-1] for t >= 1; v[0] = x[2] - x[1], the reference's reflection pad of the
-    differences (spec §2.10), so G sees exactly the reference's first input. Time is axis -2; T >= 3."""
+    differences (DESIGN.md §2.5), so G sees exactly the reference's first input. Time is axis -2; T >= 3."""
     x = jnp.asarray(x_BxTxD)
     d = x[..., 1:, :] - x[..., :-1, :]
     return jnp.concatenate([d[..., 1:2, :], d], axis=-2)
@@ -258,7 +258,7 @@ def integrate(start_BxD, v_BxTxD):
 def rotate_y(x, theta):
     """Rotation by theta (radians) about the vertical (Y) axis through the origin.
 
-    Row-vector convention, as the reference applied it (spec §2.8 step 4):
+    Row-vector convention, as the reference applied it to its augmentation:
     x' = x @ R with R = [[cos, 0, -sin], [0, 1, 0], [sin, 0, cos]], i.e.
     x' = cos*x + sin*z, z' = -sin*x + cos*z, y unchanged: the right-handed rotation by +theta
     about +Y (proper: det R = 1). x is (..., 3) xyz or (..., 2) floor (x, z) points. theta is a

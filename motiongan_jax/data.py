@@ -28,7 +28,7 @@ from motiongan_jax.representation import UNITS_TO_M, RowLayout, foot_joints, fro
 # Bump when preprocessing changes what it computes: part of every cache key.
 CACHE_VERSION = "1"
 
-# CMU styled-walk trials (subjects 137 and 142) -> style, as listed in ../shared/data/README.md.
+# CMU styled-walk trials (subjects 137 and 142) -> style, as the CMU database describes them.
 CMU_TRIAL_STYLES: dict[str, str] = {
     "137_04": "Cat", "137_08": "Chicken", "137_12": "Dinosaur", "137_16": "Drunk",
     "137_20": "GanglyTeen", "137_24": "GracefulLady", "137_29": "Normal", "137_33": "OldMan",
@@ -41,7 +41,7 @@ CMU_TRIAL_STYLES: dict[str, str] = {
     "142_21": "Singingintherainjump", "142_22": "Sneaky",
 }
 
-# The paper's 28 classes, in the order that fixes label indices 0..27 (spec §2.1).
+# The paper's 28 classes, in the order that fixes label indices 0..27 (docs/DESIGN.md §2.1).
 PAPER_STYLES = (
     "Cat", "Chicken", "Dinosaur", "Drunk", "GanglyTeen", "GracefulLady", "Normal", "OldMan",
     "SexyLady", "StrongMan", "Childish", "Clumsy", "Cool", "Depressed", "Elated", "Elderlyman",
@@ -207,8 +207,8 @@ class ClipArrays:
     clip_start_C: jax.Array  # first frame of each clip in the flat arrays
     clip_length_C: jax.Array
     clip_label_C: jax.Array
-    window_clip_W: jax.Array  # clip index of every training window
-    window_start_W: jax.Array  # start frame inside its clip
+    window_clip_M: jax.Array  # clip index of every training window
+    window_start_M: jax.Array  # start frame inside its clip
     phase_N: jax.Array  # gait phase of every frame, radians (clip_gait_phase)
     phase_valid_N: jax.Array  # whether that phase is measured (bool)
 
@@ -385,7 +385,7 @@ def _phase_or_none(clip: Clip) -> tuple[np.ndarray, np.ndarray]:
 
 
 def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfig) -> ClipArrays:
-    """Concatenate clips and list every window start (spec §2.7: clips longer than frame_nums,
+    """Concatenate clips and list every window start (DESIGN.md §2.4: clips longer than frame_nums,
     starts every window_stride frames)."""
     index = {s: i for i, s in enumerate(style_names)}
     starts, lengths, labels, w_clip, w_start = [], [], [], [], []
@@ -413,8 +413,8 @@ def build_arrays(clips: list[Clip], style_names: tuple[str, ...], cfg: DataConfi
         clip_start_C=jnp.asarray(starts, jnp.int32),
         clip_length_C=jnp.asarray(lengths, jnp.int32),
         clip_label_C=jnp.asarray(labels, jnp.int32),
-        window_clip_W=jnp.asarray(w_clip, jnp.int32),
-        window_start_W=jnp.asarray(w_start, jnp.int32),
+        window_clip_M=jnp.asarray(w_clip, jnp.int32),
+        window_start_M=jnp.asarray(w_start, jnp.int32),
         phase_N=jnp.asarray(np.concatenate([p for p, _ in phases])),
         phase_valid_N=jnp.asarray(np.concatenate([v for _, v in phases])),
     )
@@ -439,17 +439,17 @@ def make_sample_batch(cfg: DataConfig, batch_size: int):
 
     def sample_batch(arrays: ClipArrays, key: jax.Array, step) -> dict:
         k_idx, k_fps, k_rot, k_curve = jax.random.split(jax.random.fold_in(key, step), 4)
-        idx_B = epoch_indices(k_idx, step, arrays.window_clip_W.shape[0], batch_size)
-        clip_B = arrays.window_clip_W[idx_B]
-        s_B = arrays.window_start_W[idx_B]
+        idx_B = epoch_indices(k_idx, step, arrays.window_clip_M.shape[0], batch_size)
+        clip_B = arrays.window_clip_M[idx_B]
+        s_B = arrays.window_start_M[idx_B]
         n_B = arrays.clip_length_C[clip_B]
         base_B = arrays.clip_start_C[clip_B]
-        # FPS augmentation (spec §2.8): factor a, capped so the window fits in the clip.
+        # FPS augmentation (DESIGN.md §2.4): factor a, capped so the window fits in the clip.
         a_B = factors[jax.random.randint(k_fps, (batch_size,), 0, factors.shape[0])]
         fps_B = jnp.minimum(a_B, (n_B - s_B - 1).astype(jnp.float32) / cfg.frame_nums)
         step_B = jnp.maximum(jnp.floor(cfg.frame_step * fps_B).astype(jnp.int32), 1)
         # Motion samples at s, s+step', ...; the curve spans exactly those frames (the reference's
-        # curve ran ~0.7% past the last sample, spec §2.8 step 3).
+        # curve ran ~0.7% past the last sample, DESIGN.md §6).
         t_T = jnp.arange(T, dtype=jnp.int32)
         frame_BxT = base_B[:, None] + s_B[:, None] + step_B[:, None] * t_T
         root = arrays.root_Nx3[frame_BxT]

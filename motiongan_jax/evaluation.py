@@ -1,4 +1,4 @@
-"""The evaluation protocol (../shared/spec/evaluation.md) as one driver: curves, generation,
+"""The evaluation protocol (docs/DESIGN.md §7) as one driver: curves, generation,
 every metric for generated and real held-out data side by side, and the reports.
 
 Conventions. Generated clips are placed by `generate.generate_motion` (root integrated from the
@@ -399,7 +399,7 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
     fit = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_a)
     test = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_b)
     X, y = test.flat_samples
-    cents = np.asarray(fit.centroids_CxW)
+    cents = np.asarray(fit.centroids_CxD)
     nc_acc = metrics.nearest_centroid_accuracy(np.asarray(X), np.asarray(y), cents)
     ev_ratio = metrics.explained_variance(np.asarray(fit.flat_samples[0]))
     # a straight line of L samples at the held-out median spacing, for interpolation/arithmetic

@@ -36,8 +36,8 @@ samples per call, MAX_GIF_FRAMES frames x panels per GIF (Pillow holds every fra
 
 Long curves in bounded memory. One G call takes at most CHUNK_T samples (and BATCH_SAMPLES
 motions x samples). G instance-normalises over its whole time axis, so a curve up to CHUNK_T
-goes through in one pass (the statistics span the whole curve, not a training window: spec §6
-item 18); a longer one goes through in overlapping chunks of CHUNK_T samples, blended by
+goes through in one pass (the statistics span the whole curve, not a training window: DESIGN.md
+§5.1); a longer one goes through in overlapping chunks of CHUNK_T samples, blended by
 overlap-add: each chunk's weight is 0 within CHUNK_MARGIN samples of its ends (more than G's
 receptive radius, about 100 samples at kw 5: the layers' half-widths times their strides, so
 what a chunk's zero padding reaches is not used),
@@ -54,7 +54,7 @@ Root height. G predicts the root velocity (y included) and root-relative joints,
 absolute height. The root is integrated from the curve's start (curves.integrate: p[0] = start,
 p[t] = p[t-1] + v[t]), then each clip is lifted as a whole so that the 5th percentile over frames
 of its lowest joint's height is 0: feet on the floor, robust to a few frames of dipping toes.
-(The reference hard-coded a start height per style name, spec §6 item 26.)
+(The reference hard-coded a start height per style name, DESIGN.md §6.)
 
 Outputs (by suffix; several motions -> .bvh/.npz get one file each, `name_<i>.ext`;
 .gif/.mp4/.png show them side by side). Every file is written atomically: on an error nothing
@@ -117,7 +117,7 @@ INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
 # jitted once per shape: one XLA compile of G (~3 s on CPU) instead of op-by-op dispatch (~8 s)
-_apply_g = jax.jit(lambda state, vel, w, phase: step_lib.generator_apply(state, vel, w_BxW=w, phase_offset_B=phase))
+_apply_g = jax.jit(lambda state, vel, w, phase: step_lib.generator_apply(state, vel, w_BxD=w, phase_offset_B=phase))
 _latent_w = jax.jit(step_lib.latent_w)
 _stride_m = jax.jit(lambda state, w: jnp.exp(step_lib.generator(state).log_stride(w)))  # λ(w), metres
 
@@ -518,7 +518,7 @@ def floor_shift(positions_BxTxJx3: np.ndarray, percentile: float = FLOOR_PERCENT
     return -np.percentile(lowest, percentile, axis=-1)
 
 
-def generate_motion(state, layout, curve_Mx3, w_BxW, phase_offset_B=None, *, chunk_T: int = CHUNK_T,
+def generate_motion(state, layout, curve_Mx3, w_BxD, phase_offset_B=None, *, chunk_T: int = CHUNK_T,
                     progress: Callable[[int, int], None] | None = None) -> Generated:
     """Runs G on one curve for a batch of style codes; integrates the root from the curve start
     and puts each clip's feet on the floor (module doc). The motion has the curve's M samples:
@@ -532,7 +532,7 @@ def generate_motion(state, layout, curve_Mx3, w_BxW, phase_offset_B=None, *, chu
         raise GenerateError(f"curve must be (M, 3) with M >= 2 samples, got shape {curve.shape}")
     if not np.isfinite(curve).all():
         raise GenerateError("curve has non-finite values")
-    w = np.asarray(w_BxW, np.float32)
+    w = np.asarray(w_BxD, np.float32)
     if w.ndim != 2 or len(w) == 0:
         raise GenerateError(f"style codes must be (B, w_dim) with B >= 1, got shape {w.shape}")
     M, B = curve.shape[0], w.shape[0]
@@ -608,13 +608,13 @@ def chunk_weights(starts: Sequence[int], chunk_T: int) -> list[np.ndarray]:
     return out
 
 
-def _g_outputs(state, vel_Tx3, w_BxW: np.ndarray, phase_B: np.ndarray | None, chunk_T: int,
+def _g_outputs(state, vel_Tx3, w_BxD: np.ndarray, phase_B: np.ndarray | None, chunk_T: int,
                progress) -> tuple[np.ndarray, np.ndarray]:
     """(root_vel (B, T, 3), pose (B, T, R)) float64 of G on one velocity curve for every style
     code: in groups of motions and overlapping time chunks so that no call exceeds chunk_T samples
     of a motion or BATCH_SAMPLES in all; one call (the same computation as ever) when it fits.
     `phase_B`: the gait-phase offsets at the curve's first sample (None: G has no gait phase)."""
-    T, B = int(vel_Tx3.shape[0]), len(w_BxW)
+    T, B = int(vel_Tx3.shape[0]), len(w_BxD)
     L = min(T, chunk_T)
     starts = chunk_starts(T, L)
     weights = chunk_weights(starts, L)
@@ -624,7 +624,7 @@ def _g_outputs(state, vel_Tx3, w_BxW: np.ndarray, phase_B: np.ndarray | None, ch
         # the first velocity is not walked): a chunk starting at s starts at the phase walked by s
         step_T = np.linalg.norm(np.asarray(vel_Tx3, np.float64)[:, ::2], axis=-1)
         walked_T = np.cumsum(np.concatenate([[0.0], step_T[1:]]))
-        stride_B = np.asarray(_stride_m(state, jnp.asarray(w_BxW)), np.float64)
+        stride_B = np.asarray(_stride_m(state, jnp.asarray(w_BxD)), np.float64)
     total, done = -(-B // group) * len(starts), 0
     root = pose = None
     norm_T = np.zeros(T)
@@ -633,7 +633,7 @@ def _g_outputs(state, vel_Tx3, w_BxW: np.ndarray, phase_B: np.ndarray | None, ch
     for g0 in range(0, B, group):
         idx = np.minimum(np.arange(g0, g0 + group), B - 1)  # the last group padded: one compile
         keep = min(group, B - g0)
-        wg = jnp.asarray(w_BxW[idx])
+        wg = jnp.asarray(w_BxD[idx])
         for s, wt in zip(starts, weights):
             phase = None
             if phase_B is not None:

@@ -1,4 +1,4 @@
-"""GAN, class, curve and bone losses (spec §4.2). Pure jnp.
+"""GAN, class, curve and bone losses (docs/DESIGN.md §4.1). Pure jnp.
 
 Two forms of the GAN and class losses, chosen by `TrainConfig.gan_loss`:
 
@@ -84,7 +84,7 @@ def curve_loss(root_vel_BxTx3: jax.Array, curve_BxTx3: jax.Array, points: int = 
 
     With s = T / points, x̂_k = c[0] + Σ_{τ=1}^{k·s−1} v̂[τ] is compared with c[k·s−1] for
     k = 1..points: 0.5 (MSE_x + MSE_z) per point (mean over the batch), summed over points.
-    Convention (spec §6 item 6): v[0] is ignored, as in `curves.integrate` and everywhere else in
+    Convention (DESIGN.md §2.5): v[0] is ignored, as in `curves.integrate` and everywhere else in
     this package; the reference's sum also includes v̂[0] (whose input counterpart is a duplicate).
     Lengths are divided by `unit`.
     """

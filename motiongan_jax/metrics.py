@@ -22,7 +22,7 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-# Reference foot-skate threshold (§5.6): 0.5 CMU units per 15 Hz sample, in metres.
+# Reference foot-skate threshold (docs/DESIGN.md §5.4): 0.5 CMU units per 15 Hz sample, in metres.
 CMU_UNIT_M = 0.056444
 FOOT_SKATE_THRESHOLD_M = 0.5 * CMU_UNIT_M
 
@@ -196,7 +196,7 @@ def _two_paths(root_Tx3, curve_Tx3, min_len: int) -> tuple[np.ndarray, np.ndarra
 
 
 def trajectory_error_original(root_Tx3, curve_Tx3, every: int = 8, window: int = 16) -> float:
-    """The reference's trajectory error (§5.6), in metres.
+    """The reference's trajectory error (DESIGN.md §5.4), in metres.
 
     For t = 0, every, 2·every, … < T: e_t = min over j in [max(0, t − window), min(T, t + window))
     of the floor distance ‖(root[t] − curve[j])_xz‖; the result is Σ e_t / ⌊T / every⌋.
@@ -271,7 +271,7 @@ def path_length_ratio(root_Tx3, curve_Tx3) -> float:
 
 
 def foot_skate_original(toes_world_Tx2x3, threshold_m: float = FOOT_SKATE_THRESHOLD_M) -> float:
-    """The reference's foot-skate distance (§5.6), in metres per sample.
+    """The reference's foot-skate distance (DESIGN.md §5.4), in metres per sample.
 
     For each step t = 0..T−2, m_t = the smaller horizontal step length of the two toes (the
     slower toe is taken as the planted one); FS = Σ_t m_t·[m_t > threshold] / T (the reference

@@ -1,4 +1,4 @@
-"""One training iteration, D then G (spec §4.2), in NNX's functional form.
+"""One training iteration, D then G (docs/DESIGN.md §4.2), in NNX's functional form.
 
 The modules are split once into graph definitions (static) and state (arrays); `train_step` is a
 pure function that merges them inside, so the caller can `jax.jit(..., donate_argnums=0)` it.
@@ -48,7 +48,7 @@ class TrainState:
     g_ema_params: Any = None  # EMA of g_params under train.g_ema_decay > 0, else None
 
 
-def _num_joints(layout) -> int:
+def _num_rel_joints(layout) -> int:
     rows = int(layout.num_rows)
     if rows % 3:
         raise ValueError(f"layout.num_rows must be a multiple of 3, got {rows}")
@@ -87,25 +87,25 @@ def generator_bones(model_cfg, layout) -> tuple[tuple[int, int, float], ...] | N
     return tuple((int(a), int(b), float(length)) for (a, b), length in zip(layout.bone_pairs, layout.bone_lengths_m))
 
 
-def _build_g(model_cfg, num_joints: int, num_styles: int, rest_pose_R, key, impl: str = "fast",
+def _build_g(model_cfg, num_rel_joints: int, num_styles: int, rest_pose_R, key, impl: str = "fast",
              dtype: str = "float32", bones=None) -> Generator:
     m = model_cfg
-    return Generator(num_joints, top=m.top, kw=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
+    return Generator(num_rel_joints, base_channels=m.top, kt=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
                      num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
                      rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones,
                      gait_phase=m.gait_phase, root_height=m.root_height, impl=impl, compute_dtype=dtype,
                      rngs=nnx.Rngs(key))
 
 
-def _build_d(model_cfg, seq_len: int, num_joints: int, num_styles: int, key, impl: str = "fast",
+def _build_d(model_cfg, seq_len: int, num_rel_joints: int, num_styles: int, key, impl: str = "fast",
              dtype: str = "float32") -> Discriminator:
-    return Discriminator(num_joints, num_styles=num_styles, seq_len=seq_len, top=model_cfg.top,
-                         kw=model_cfg.kw, length_unit=model_cfg.length_unit, impl=impl,
+    return Discriminator(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.top,
+                         kt=model_cfg.kw, length_unit=model_cfg.length_unit, impl=impl,
                          compute_dtype=dtype, frame=model_cfg.d_frame, cond=model_cfg.d_cond,
                          rngs=nnx.Rngs(key))
 
 
-def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=None, *,
+def build_models(cfg, num_rel_joints: int, num_styles: int, key: jax.Array, layout=None, *,
                  impl: str | None = None, dtype: str | None = None) -> tuple[Generator, Discriminator]:
     """(G, D) as NNX modules from a full Config, initialised like `init_state` with this key (equal
     up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only.
@@ -113,13 +113,13 @@ def build_models(cfg, num_joints: int, num_styles: int, key: jax.Array, layout=N
     `compute_dtype`."""
     k_g, k_d = jax.random.split(key)
     impl, dtype = conv_impl(cfg.model, impl), compute_dtype(cfg.model, dtype)
-    return (_build_g(cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout), k_g, impl, dtype,
+    return (_build_g(cfg.model, num_rel_joints, num_styles, output_prior_rows(cfg.model, layout), k_g, impl, dtype,
                      generator_bones(cfg.model, layout)),
-            _build_d(cfg.model, cfg.data.window_T, num_joints, num_styles, k_d, impl, dtype))
+            _build_d(cfg.model, cfg.data.window_T, num_rel_joints, num_styles, k_d, impl, dtype))
 
 
 def optimizers(cfg) -> tuple[optax.GradientTransformation, optax.GradientTransformation]:
-    """(Adam for G, Adam for D), β = (beta1, beta2), eps 1e-8, no decay or schedule (spec §4.1)."""
+    """(Adam for G, Adam for D), β = (beta1, beta2), eps 1e-8, no decay or schedule (DESIGN.md §4.3)."""
     t = cfg.train
     return (optax.adam(t.lr_g, b1=t.beta1, b2=t.beta2, eps=1e-8),
             optax.adam(t.lr_d, b1=t.beta1, b2=t.beta2, eps=1e-8))
@@ -131,13 +131,13 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None
     only chooses how the convolutions are computed: same parameters, same results; `dtype` (see
     `compute_dtype`) the activations' dtype. Both live in the graph definitions, so the step and
     `generator_apply` follow them; parameters and optimizer state are float32 either way."""
-    num_joints = _num_joints(layout)
+    num_rel_joints = _num_rel_joints(layout)
     k_g, k_d = jax.random.split(key)
     kwargs = (("impl", conv_impl(cfg.model, impl)), ("dtype", compute_dtype(cfg.model, dtype)))
     g_kwargs = kwargs + (("bones", generator_bones(cfg.model, layout)),)
-    g_def, g_params = init_split(_build_g, (cfg.model, num_joints, num_styles, output_prior_rows(cfg.model, layout)),
+    g_def, g_params = init_split(_build_g, (cfg.model, num_rel_joints, num_styles, output_prior_rows(cfg.model, layout)),
                                  k_g, nnx.Param, build_kwargs=g_kwargs)
-    d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_joints, num_styles),
+    d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_rel_joints, num_styles),
                                        k_d, nnx.Param, SpectralNormState, build_kwargs=kwargs)
     tx_g, tx_d = optimizers(cfg)
     opt_g, opt_d = jax.jit(lambda g, d: (tx_g.init(g), tx_d.init(d)))(g_params, d_params)
@@ -193,22 +193,22 @@ def latent_w(state: TrainState, labels_B: jax.Array, z_BxZ: jax.Array | None = N
 
 
 def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax.Array | None = None,
-                    z_BxZ: jax.Array | None = None, *, w_BxW: jax.Array | None = None,
+                    z_BxZ: jax.Array | None = None, *, w_BxD: jax.Array | None = None,
                     phase_offset_B: jax.Array | None = None):
     """(root_vel_BxTx3, pose_BxTxR) from G with the state's parameters.
 
-    Give either labels (and optionally z, default zeros) or a style code `w_BxW` directly. To run
+    Give either labels (and optionally z, default zeros) or a style code `w_BxD` directly. To run
     other parameters, pass `state.replace(g_params=...)`. A G with a gait phase takes its phase
     offsets (radians, B) from `phase_offset_B`, default 0.
     """
     g = generator(state)
-    if w_BxW is None:
+    if w_BxD is None:
         if labels_B is None:
-            raise ValueError("generator_apply needs labels_B or w_BxW")
+            raise ValueError("generator_apply needs labels_B or w_BxD")
         labels_B = jnp.asarray(labels_B, jnp.int32)
         z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
-        w_BxW = g.style(labels_B, z)
-    return g(curve_vel_BxTx3, w_BxW, phase_offset_B)
+        w_BxD = g.style(labels_B, z)
+    return g(curve_vel_BxTx3, w_BxD, phase_offset_B)
 
 
 def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:
@@ -326,7 +326,7 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths for {num_styles} styles")
     if tcfg.gan_loss not in losses.GAN_LOSSES:
         raise ValueError(f"train.gan_loss must be one of {losses.GAN_LOSSES}, got {tcfg.gan_loss!r}")
-    _num_joints(layout)
+    _num_rel_joints(layout)
     bone_pairs = tuple((int(a), int(b)) for a, b in layout.bone_pairs)
     bone_lengths = np.asarray(layout.bone_lengths_m, np.float32)
     if bone_lengths.shape != (len(bone_pairs),):

@@ -369,15 +369,15 @@ def _path(rng: np.random.Generator, s: np.ndarray):
     return x - x[i0], z - z[i0], heading
 
 
-def _foot_pose(W, psi, alpha, phi=None):
-    """Ankle position of a stance foot whose flat-foot ankle position is W, yaw psi, pitched by
-    alpha (toes up +) about the heel (alpha > 0) or the ball (alpha < 0). phi <= 0: the toe
+def _foot_pose(flat_ankle, psi, alpha, phi=None):
+    """Ankle position of a stance foot whose flat-foot ankle position is `flat_ankle`, yaw psi,
+    pitched by alpha (toes up +) about the heel (alpha > 0) or the ball (alpha < 0). phi <= 0: the toe
     segment itself pitched toes-down by -phi about the toe tip, lifting the ball (push-off)."""
     pivot = np.where((alpha > 0)[..., None], _HEEL_M, _BALL_M)
     if phi is not None:
         tip = np.array([0.0, 0.0, _TOE_END * _U])
         pivot = pivot + (alpha <= 0)[..., None] * (tip - _mv(_rx(-phi), tip))
-    return W + _mv(_ry(psi), pivot - _mv(_rx(-alpha), np.where((alpha > 0)[..., None], _HEEL_M, _BALL_M)))
+    return flat_ankle + _mv(_ry(psi), pivot - _mv(_rx(-alpha), np.where((alpha > 0)[..., None], _HEEL_M, _BALL_M)))
 
 
 def _two_link_ik(d):
@@ -463,8 +463,8 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         kx, kz, kh = path_at(tk)
         k_left = np.stack([np.cos(kh), np.zeros_like(kh), -np.sin(kh)], -1)
         k_fwd = np.stack([np.sin(kh), np.zeros_like(kh), np.cos(kh)], -1)
-        W = (np.stack([kx, np.full_like(kx, _ANKLE_H), kz], -1) + k_left * (sign * p.step_width / 2)
-             + k_fwd * _HIP_M[2])
+        flat_ankle = (np.stack([kx, np.full_like(kx, _ANKLE_H), kz], -1) + k_left * (sign * p.step_width / 2)
+                      + k_fwd * _HIP_M[2])
         psi = kh + sign * toe_out
         i = k - ks[0]
         stance = ph_ < beta
@@ -472,11 +472,11 @@ def generate_clip(params: GaitParams, *, key_or_seed, num_frames: int, fps: floa
         a_st = np.where(ph_ < p_heel, theta_hs * (1 - _smoothstep(ph_ / p_heel)),
                         -theta_to * np.clip((ph_ - p_roll) / (beta - p_roll), 0.0, 1.0) ** 2)
         phi_st = -theta_tt * np.clip((ph_ - p_toe) / (beta - p_toe), 0.0, 1.0) ** 2
-        ank_st = _foot_pose(W[i], psi[i], a_st, phi_st)
+        ank_st = _foot_pose(flat_ankle[i], psi[i], a_st, phi_st)
         # Swing from stance i (toe-off) to stance i + 1 (heel strike).
         sw = np.clip((ph_ - beta) / (1 - beta), 0.0, 1.0)
-        P0 = _foot_pose(W[i], psi[i], np.full(F, -theta_to), np.full(F, -theta_tt))
-        P1 = _foot_pose(W[np.minimum(i + 1, len(ks) - 1)], psi[np.minimum(i + 1, len(ks) - 1)],
+        P0 = _foot_pose(flat_ankle[i], psi[i], np.full(F, -theta_to), np.full(F, -theta_tt))
+        P1 = _foot_pose(flat_ankle[np.minimum(i + 1, len(ks) - 1)], psi[np.minimum(i + 1, len(ks) - 1)],
                         np.full(F, theta_hs))
         m = _min_jerk(sw)
         ank_sw = P0 + (P1 - P0) * m[:, None]

@@ -302,14 +302,14 @@ def plot_gait(traces, path, *, sample_rate: float, contact_height_m: float, titl
     plt = _pyplot()
     n = len(traces)
     fig, axes = plt.subplots(n, 2, figsize=(10, 1.25 * n + 0.8), sharex=True, sharey=True, squeeze=False)
-    top = max(max(float(t.real_heights_Tx2.max()), float(t.gen_heights_Tx2.max())) for t in traces)
+    max_height = max(max(float(t.real_heights_Tx2.max()), float(t.gen_heights_Tx2.max())) for t in traces)
     for row, tr in zip(axes, traces):
         for ax, h, what in ((row[0], tr.real_heights_Tx2, "real"), (row[1], tr.gen_heights_Tx2, "generated")):
             t = np.arange(len(h)) / sample_rate
             ax.axhspan(0, contact_height_m, color="0.92", lw=0)
             ax.plot(t, h[:, 0], color=LEFT_COLOR, lw=1.3, label="left toe")
             ax.plot(t, h[:, 1], color=RIGHT_COLOR, lw=1.3, label="right toe")
-            ax.set_ylim(-0.02, max(top * 1.05, 0.1))
+            ax.set_ylim(-0.02, max(max_height * 1.05, 0.1))
             ax.text(0.01, 0.95, f"{tr.style} · {what}", transform=ax.transAxes, va="top", fontsize=8)
             ax.tick_params(labelsize=7)
     axes[0, 0].legend(loc="upper right", fontsize=7, frameon=False, ncol=2)

@@ -1,6 +1,6 @@
-"""Expected values written out from the spec (../shared/spec/reference-spec.md), shared by tests."""
+"""Expected values of the reference implementation (docs/DESIGN.md §2.2), written out by hand, shared by tests."""
 
-# Spec §2.2: depth-first joint order of CMU_standard.bvh (the spec renames the root "Root").
+# Depth-first joint order of the CMU skeleton (the reference renames the root "Root").
 CMU_NAMES = (
     "Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite",
     "RHipJoint", "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite",
@@ -11,7 +11,7 @@ CMU_NAMES = (
     "RightHandIndex1_EndSite", "RThumb", "RThumb_EndSite",
 )
 
-# Spec §2.3: the paper's 28 kept joints, in order.
+# The paper's 28 kept joints, in order (DESIGN.md §2.2).
 PAPER_JOINTS = (
     "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite",
     "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite",
@@ -19,7 +19,7 @@ PAPER_JOINTS = (
     "LeftArm", "LeftForeArm", "LeftHand", "LeftHandIndex1", "LeftHandIndex1_EndSite", "LThumb_EndSite",
     "RightArm", "RightForeArm", "RightHand", "RightHandIndex1", "RightHandIndex1_EndSite", "RThumb_EndSite",
 )
-# Spec §2.3: the 27 bone pairs of the bone loss.
+# The 27 bone pairs of the bone loss (DESIGN.md §2.2).
 PAPER_BONES = {
     (0, 11), (11, 12), (12, 22), (22, 23), (23, 24), (24, 27), (24, 25), (25, 26),
     (12, 16), (16, 17), (17, 18), (18, 21), (18, 19), (19, 20),

@@ -115,16 +115,16 @@ def test_style_codes_and_gait_parameters(run):
     names = meta["style_names"]
     codes = A.style_codes(state, names, k=3, key=jax.random.key(2))
     W = cfg.model.w_dim
-    chex.assert_shape(codes.zero_CxW, (len(names), W))
-    chex.assert_shape(codes.samples_CxKxW, (len(names), 3, W))
+    chex.assert_shape(codes.zero_CxD, (len(names), W))
+    chex.assert_shape(codes.samples_CxKxD, (len(names), 3, W))
     labels = jnp.arange(len(names))
-    np.testing.assert_allclose(codes.zero_CxW, A.step_lib.generator(state).style(
+    np.testing.assert_allclose(codes.zero_CxD, A.step_lib.generator(state).style(
         labels, jnp.zeros((len(names), cfg.model.z_dim))), rtol=1e-5, atol=1e-9)
     z = jax.random.normal(jax.random.key(5), (len(names), cfg.model.z_dim))
     w = A.latent_codes(state, labels, z)
     chex.assert_shape(w, (len(names), W))
     np.testing.assert_allclose(w, A.step_lib.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
-    assert not np.allclose(w, codes.zero_CxW)  # z reaches w
+    assert not np.allclose(w, codes.zero_CxD)  # z reaches w
     gait = A.gait_parameters(meta, cfg)
     assert gait["param_names"] == list(synthetic.PARAM_NAMES) + ["speed"]
     want = [[getattr(synthetic.STYLES[s], n) for n in synthetic.PARAM_NAMES] + [synthetic.STYLES[s].speed]
@@ -213,17 +213,17 @@ def test_style_search_recovers_a_known_w(run):
     curve = jnp.cumsum(jax.random.normal(jax.random.key(3), (N, T, 3)).at[..., 1].set(0), axis=1)
     codes = A.style_codes(state, meta["style_names"], k=3)
     direction = jax.random.normal(jax.random.key(5), (cfg.model.w_dim,))
-    w_true = codes.centroids_CxW[0] + 0.3 * direction / jnp.linalg.norm(direction)
+    w_true = codes.centroids_CxD[0] + 0.3 * direction / jnp.linalg.norm(direction)
     probe = A.MotionWindows(curve, jnp.zeros((N, T, layout.num_rows)), curve, np.zeros(N, int), 1)
     rv, pose = A.reconstruct(state, probe, w_true)
     target = A.MotionWindows(curves.integrate(curve[:, 0], rv), pose, curve, np.zeros(N, int), 1)
     before = jax.tree.map(np.array, state.g_params)
-    res = A.style_search(state, target, codes.centroids_CxW[1:3], ["a", "b"], steps=100, lr=0.02)
-    chex.assert_shape(res.w_SxW, (2, cfg.model.w_dim))
+    res = A.style_search(state, target, codes.centroids_CxD[1:3], ["a", "b"], steps=100, lr=0.02)
+    chex.assert_shape(res.w_SxD, (2, cfg.model.w_dim))
     assert res.initial_loss_S.min() > 1e-5  # the starts are far from the target
     assert res.loss < 1e-6 * res.initial_loss_S.min(), (res.initial_loss_S, res.final_loss_S)
-    np.testing.assert_allclose(res.w_W, w_true, atol=1e-3)
-    got = A.reconstruct(state, target, res.w_W)
+    np.testing.assert_allclose(res.w_D, w_true, atol=1e-3)
+    got = A.reconstruct(state, target, res.w_D)
     np.testing.assert_allclose(got[1], pose, atol=1e-4)
     assert res.history_HxS.shape == (10, 2) and res.history_HxS[0, 0] == pytest.approx(res.initial_loss_S[0])
     jax.tree.map(np.testing.assert_array_equal, before, jax.tree.map(np.array, state.g_params))

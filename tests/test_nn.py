@@ -28,11 +28,11 @@ TOP, T, B, C = 8, 16, 2, 4
 
 
 def _build_g(num_joints, key):
-    return Generator(num_joints, top=TOP, kw=5, w_dim=64, z_dim=64, num_styles=C, rngs=nnx.Rngs(key))
+    return Generator(num_joints, base_channels=TOP, kt=5, w_dim=64, z_dim=64, num_styles=C, rngs=nnx.Rngs(key))
 
 
 def _build_d(num_joints, key):
-    return Discriminator(num_joints, num_styles=C, seq_len=T, top=TOP, kw=5, rngs=nnx.Rngs(key))
+    return Discriminator(num_joints, num_styles=C, seq_len=T, base_channels=TOP, kt=5, rngs=nnx.Rngs(key))
 
 
 @pytest.fixture(scope="module")
@@ -144,7 +144,7 @@ def test_tconv_matches_loop_and_conv_transpose():
     got = tconv(jnp.asarray(x))
     chex.assert_shape(got, (2, 6, 6, 2))
     np.testing.assert_allclose(np.asarray(got), want, atol=1e-5)
-    # the spec's lax.conv_transpose formulation (§3.1)
+    # the same layer as lax.conv_transpose of the PyTorch weight, cropped (DESIGN.md §3.1)
     ref = jax.lax.conv_transpose(jnp.asarray(x), jnp.asarray(w_torch.transpose(2, 3, 1, 0)), (1, 3),
                                  "VALID", dimension_numbers=("NHWC", "HWIO", "NHWC"),
                                  transpose_kernel=True)[:, 2:-2] + jnp.array([0.5, -1.0])
@@ -233,9 +233,9 @@ def test_flatten_is_channel_major():
 @pytest.mark.parametrize("num_styles,g_count,d_count",
                          [(28, 16_156_164, 2_702_173), (29, 16_156_228, 2_706_270)])
 def test_parameter_counts_paper_shapes(num_styles, g_count, d_count):
-    g = nnx.eval_shape(lambda: Generator(27, top=64, kw=5, w_dim=64, z_dim=64, num_styles=num_styles,
+    g = nnx.eval_shape(lambda: Generator(27, base_channels=64, kt=5, w_dim=64, z_dim=64, num_styles=num_styles,
                                          rngs=nnx.Rngs(0)))
-    d = nnx.eval_shape(lambda: Discriminator(27, num_styles=num_styles, seq_len=128, top=64, kw=5,
+    d = nnx.eval_shape(lambda: Discriminator(27, num_styles=num_styles, seq_len=128, base_channels=64, kt=5,
                                              rngs=nnx.Rngs(0)))
     assert count_params(g) == g_count
     assert count_params(d) == d_count
@@ -263,7 +263,7 @@ def test_style_label_changes_output_at_init(gen27):
     fn, params, vel, z = gen27["fn16"], gen27["params"], gen27["vel16"], gen27["z"]
     (r0, p0), w0 = fn(params, vel, jnp.array([0, 0]), z)
     (r1, p1), w1 = fn(params, vel, jnp.array([1, 1]), z)
-    # The faithful init keeps w tiny (|w| ~ 1e-5, spec §3.2) ...
+    # The faithful init keeps w tiny (|w| ~ 1e-5, DESIGN.md §3.3) ...
     assert 1e-7 < float(jnp.mean(jnp.abs(w0))) < 1e-4
     # ... yet the label still moves the pose by a few percent (~4e-2 measured), 1e5 x float32
     # rounding: the 14 AdaINs compound it.
@@ -308,8 +308,8 @@ def test_discriminator_rejects_other_lengths():
     d = nnx.eval_shape(lambda: _build_d(27, jax.random.key(0)))
     with pytest.raises(ValueError, match="T=16"):
         d._input(jnp.zeros((1, 32, 3)), jnp.zeros((1, 32, 81)))
-    with pytest.raises(ValueError, match="num_joints"):
-        Generator(28, top=4, num_styles=2, rngs=nnx.Rngs(0))
+    with pytest.raises(ValueError, match="num_rel_joints"):
+        Generator(28, base_channels=4, num_styles=2, rngs=nnx.Rngs(0))
 
 
 def test_latent_transform_pixel_norm_is_scale_invariant(gen27):
@@ -338,16 +338,16 @@ def test_latent_init_sets_the_scale_of_w():
 def test_networks_take_metres_and_work_in_their_length_unit():
     """G(length_unit=u) on metres equals G(length_unit=1) on lengths in u, scaled back by u."""
     u = 0.056444
-    g1 = Generator(27, top=4, w_dim=8, z_dim=8, num_styles=3, rngs=nnx.Rngs(0))
-    gu = Generator(27, top=4, w_dim=8, z_dim=8, num_styles=3, length_unit=u, rngs=nnx.Rngs(0))
+    g1 = Generator(27, base_channels=4, w_dim=8, z_dim=8, num_styles=3, rngs=nnx.Rngs(0))
+    gu = Generator(27, base_channels=4, w_dim=8, z_dim=8, num_styles=3, length_unit=u, rngs=nnx.Rngs(0))
     vel = 0.05 * jax.random.normal(jax.random.key(2), (2, 16, 3))
     w = g1.style(jnp.array([0, 1]), jnp.zeros((2, 8)))
     r1, p1 = g1(vel / u, w)
     ru, pu = gu(vel, w)
     np.testing.assert_allclose(ru, r1 * u, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(pu, p1 * u, rtol=1e-5, atol=1e-9)
-    d1 = Discriminator(27, num_styles=3, seq_len=16, top=4, rngs=nnx.Rngs(1))
-    du = Discriminator(27, num_styles=3, seq_len=16, top=4, length_unit=u, rngs=nnx.Rngs(1))
+    d1 = Discriminator(27, num_styles=3, seq_len=16, base_channels=4, rngs=nnx.Rngs(1))
+    du = Discriminator(27, num_styles=3, seq_len=16, base_channels=4, length_unit=u, rngs=nnx.Rngs(1))
     a1, c1 = d1(r1, p1, update_stats=False)
     au, cu = du(ru, pu, update_stats=False)
     np.testing.assert_allclose(au, a1, rtol=1e-4, atol=1e-6)

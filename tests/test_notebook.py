@@ -97,7 +97,7 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     assert ns["WORKDIR"] is None and ns["cfg"].name == shipped.provenance["config_name"]
     assert int(ns["state"].step) == shipped.provenance["steps"]
     names, codes = ns["names"], ns["codes"]
-    C, W = codes.zero_CxW.shape
+    C, W = codes.zero_CxD.shape
     assert C == len(names) and W == ns["cfg"].model.w_dim
 
     # PCA: ratios of the total variance, non-negative, sorted, summing to <= 1
@@ -127,7 +127,7 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     # style search on a held-out clip of the embedded dataset: the loss went down from the start
     assert Path(ns["clip"]).name == "OldMan_05.bvh"
     res = ns["res"]
-    chex.assert_shape(res.w_W, (W,))
+    chex.assert_shape(res.w_D, (W,))
     assert np.isfinite(res.final_loss_S).all()
     assert res.loss < res.initial_loss_S[res.best_start]
     assert res.loss == pytest.approx(float(res.final_loss_S.min()))

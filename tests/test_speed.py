@@ -195,7 +195,7 @@ def _leaf_rel(a_tree, b_tree) -> float:
 
 @pytest.mark.parametrize("num_joints,T", [(27, 16), (20, 32)])
 def test_generator_fast_equals_straightforward(num_joints, T):
-    fast, plain = _pair(lambda impl: Generator(num_joints, top=8, w_dim=16, z_dim=16, num_styles=3, impl=impl,
+    fast, plain = _pair(lambda impl: Generator(num_joints, base_channels=8, w_dim=16, z_dim=16, num_styles=3, impl=impl,
                                                rngs=nnx.Rngs(0)))
     vel = 0.1 * jax.random.normal(jax.random.key(1), (2, T, 3))
     labels, z = jnp.array([0, 2]), jax.random.normal(jax.random.key(2), (2, 16))
@@ -223,7 +223,7 @@ def test_generator_fast_equals_straightforward(num_joints, T):
 
 
 def test_discriminator_fast_equals_straightforward():
-    fast, plain = _pair(lambda impl: Discriminator(20, num_styles=4, seq_len=16, top=8, impl=impl, rngs=nnx.Rngs(0)))
+    fast, plain = _pair(lambda impl: Discriminator(20, num_styles=4, seq_len=16, base_channels=8, impl=impl, rngs=nnx.Rngs(0)))
     root = jax.random.normal(jax.random.key(1), (2, 16, 3))
     pose = jax.random.normal(jax.random.key(2), (2, 16, 60))
 
@@ -316,7 +316,7 @@ def test_bf16_generator_tracks_float32():
     """G at initialisation amplifies small relative changes ~30x (14 instance norms on random
     weights): merely rounding its float32 input to bf16 moves the outputs by 3% RMS here. bf16
     compute throughout may move them by at most 4x that (measured 2.5x: 7.6% vs 3.0%)."""
-    g32, g16 = (Generator(27, top=8, w_dim=16, z_dim=16, num_styles=3, compute_dtype=d, rngs=nnx.Rngs(0))
+    g32, g16 = (Generator(27, base_channels=8, w_dim=16, z_dim=16, num_styles=3, compute_dtype=d, rngs=nnx.Rngs(0))
                 for d in ("float32", "bfloat16"))
     vel = 0.1 * jax.random.normal(jax.random.key(1), (2, 64, 3))
     w = g32.style(jnp.array([0, 1]), jax.random.normal(jax.random.key(2), (2, 16)))

@@ -201,7 +201,7 @@ def test_generator_apply_paths_agree(setup):
 
     def both(state, vel, labels):
         w = step_lib.latent_w(state, labels)  # z = 0
-        by_w = step_lib.generator_apply(state, vel, w_BxW=w)
+        by_w = step_lib.generator_apply(state, vel, w_BxD=w)
         by_label = step_lib.make_generate(CFG, LAYOUT, C)(state, vel, labels)
         return w, by_w, by_label
 

@@ -21,7 +21,7 @@ IDX = {n: i for i, n in enumerate(synthetic.JOINT_NAMES)}
 
 ZERO_LENGTH = {"LHipJoint", "RHipJoint", "LowerBack", "Neck", "LeftShoulder", "LeftFingerBase",
                "LThumb", "RightShoulder", "RightFingerBase", "RThumb"}
-# The paper's 28 kept joints (spec §2.3), with the file root's own name.
+# The paper's 28 kept joints (DESIGN.md §2.2), with the file root's own name.
 PAPER_KEPT = (
     "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "LeftToeBase_EndSite", "RightUpLeg",
     "RightLeg", "RightFoot", "RightToeBase", "RightToeBase_EndSite", "Spine", "Spine1", "Neck1",

@@ -162,7 +162,7 @@ def test_labels_keep_their_embeddings_and_g_follows_its_code_after_training(unbr
     # its size (5 seeds, SSE4.2 kernels), far from the 0.1 asked
     vel = curves.velocity(jax.numpy.asarray(train_lib.preview_curve(T, 0.08))[None]).repeat(2, 0)
     u = (w_CxW[1] - w_CxW[0]) / np.linalg.norm(w_CxW[1] - w_CxW[0])
-    _, pose = step_lib.generator_apply(state, vel, w_BxW=jax.numpy.asarray(np.stack([w_CxW[0], w_CxW[0] + 0.1 * u])))
+    _, pose = step_lib.generator_apply(state, vel, w_BxD=jax.numpy.asarray(np.stack([w_CxW[0], w_CxW[0] + 0.1 * u])))
     diff = float(np.abs(pose[0] - pose[1]).mean() / np.abs(pose[0]).mean())
     assert diff > 0.1, diff
 

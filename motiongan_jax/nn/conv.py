@@ -1,12 +1,9 @@
 """2-D convolution (NHWC input, HWIO kernel) in the form XLA:CPU runs fastest.
 
-Measured at this model's shapes (docs/PERFORMANCE.md, bench/bench_conv.py), XLA:CPU 0.10:
-
-* a convolution whose `padding` is all zero runs about 2.5x slower than the same convolution
-  with any non-zero padding (the library kernel XLA hands it to takes a slow path for VALID);
-* input gradients (XLA's transposed convolution) run at full speed;
-* weight gradients are slow, up to 10x slower than the matrix product they amount to (the
-  transposed convolutions' weight gradients are the worst: 5 GFLOP/s).
+At this model's shapes XLA:CPU runs a convolution whose `padding` is all zero much slower than
+one with any padding (its library kernel takes a slow path for VALID), runs input gradients at
+full speed, and runs weight gradients far below the matrix products they amount to, the
+transposed convolutions' worst (figures: docs/PERFORMANCE.md, "Faster work"; bench/bench_conv.py).
 
 So `conv2d(..., impl="fast")` computes exactly the same sums as `lax.conv_general_dilated`,
 differently scheduled:
@@ -17,8 +14,7 @@ differently scheduled:
 * input gradient: XLA's, unchanged;
 * width groups: a kernel whose width equals its width stride (D's convs) or spans the whole
   width (c_traj) sees disjoint column groups; forward and input gradient fold them into the
-  channels, a kt x 1 convolution (XLA's input gradient of c_traj's 5 x 81 kernel alone costs
-  ~0.6 s per step);
+  channels, a kt x 1 convolution (XLA's input gradient of c_traj's 5 x 81 kernel is slow);
 * weight gradient on CPU, stride 1: one matrix product per chunk of samples, summed by a `lax.scan`, of
   the shifted windows of x (im2col) against dy, where each kernel tap (time or width) is taken
   either as a window of x or as dy shifted into place, whichever makes the smaller matrices;

@@ -1,13 +1,14 @@
-"""Discriminator D (spec §3.5): spectral norm on every layer, built for one window length T.
+"""Discriminator D (docs/DESIGN.md §3.5): spectral norm on every layer, built for one window length T.
 
 Input (B x T x 81 x 2, NHWC): channel 0 is the root velocity tiled across the rows (each
-joint's xyz triple sees the root's xyz), channel 1 the pose rows.
+joint's xyz triple sees the root's xyz), channel 1 the pose rows. c = `base_channels`
+(model.top), kt the time kernel.
 
-    c0_0  SN-conv kt×3 /(2,3)    2 -> top    T/2  × 27
-    c1_0  SN-conv kt×3 /(2,3)  top -> 2top   T/4  × 9    (`features`)
-    c2_0  SN-conv kt×3 /(2,3) 2top -> 4top   T/8  × 3
-    c3_0  SN-conv kt×3 /(2,3) 4top -> 8top   T/16 × 1
-    flatten channel-major (index c·(T/16) + t, PyTorch's order)
+    c0_0  SN-conv kt×3 /(2,3)   2 -> c    T/2  × 27
+    c1_0  SN-conv kt×3 /(2,3)   c -> 2c   T/4  × 9    (`features`)
+    c2_0  SN-conv kt×3 /(2,3)  2c -> 4c   T/8  × 3
+    c3_0  SN-conv kt×3 /(2,3)  4c -> 8c   T/16 × 1
+    flatten channel-major (index ch·(T/16) + t, PyTorch's order)
     l_last SN-linear -> 1 (real/fake logit), l_cls SN-linear -> C (style logits)
 
 All convs reflect-pad kt//2 frames in time and nothing in width. Inits: conv N(0, 0.02²) with
@@ -69,12 +70,12 @@ def flatten_channel_major(x_BxTx1xC: jax.Array) -> jax.Array:
 class Discriminator(nnx.Module):
     def __init__(
         self,
-        num_joints: int = 27,
+        num_rel_joints: int = 27,
         *,
         num_styles: int,
         seq_len: int = 128,
-        top: int = 64,
-        kw: int = 5,
+        base_channels: int = 64,
+        kt: int = 5,
         length_unit: float = 1.0,
         impl: str = "fast",
         compute_dtype: str = "float32",
@@ -88,24 +89,25 @@ class Discriminator(nnx.Module):
             raise ValueError(f"cond must be one of {CONDS}, got {cond!r}")
         self.frame = frame
         self.cond = cond
-        if not 1 <= num_joints <= PADDED_ROWS // 3:
-            raise ValueError(f"num_joints must be in 1..{PADDED_ROWS // 3}, got {num_joints}")
+        if not 1 <= num_rel_joints <= PADDED_ROWS // 3:
+            raise ValueError(f"num_rel_joints must be in 1..{PADDED_ROWS // 3}, got {num_rel_joints}")
         if seq_len % 16:
             raise ValueError(f"D needs T divisible by 16, got {seq_len}")
-        self.num_joints = num_joints
+        self.num_rel_joints = num_rel_joints
         self.seq_len = seq_len
         # activations' dtype (bf16 compute); parameters, spectral norm and the heads stay float32
         self.compute_dtype = str(jnp.dtype(compute_dtype))
         self.length_unit = float(length_unit)
 
         def sn_conv(cin, cout):
-            return Conv(cin, cout, (kw, 3), (2, 3), spectral_norm=True, impl=impl, rngs=rngs)
+            return Conv(cin, cout, (kt, 3), (2, 3), spectral_norm=True, impl=impl, rngs=rngs)
 
-        self.c0_0 = sn_conv(2, top)
-        self.c1_0 = sn_conv(top, 2 * top)
-        self.c2_0 = sn_conv(2 * top, 4 * top)
-        self.c3_0 = sn_conv(4 * top, 8 * top)
-        feat = 8 * top * (seq_len // 16)
+        c = base_channels
+        self.c0_0 = sn_conv(2, c)
+        self.c1_0 = sn_conv(c, 2 * c)
+        self.c2_0 = sn_conv(2 * c, 4 * c)
+        self.c3_0 = sn_conv(4 * c, 8 * c)
+        feat = 8 * c * (seq_len // 16)
         bound = 1.0 / math.sqrt(feat)
 
         def sn_linear(out):
@@ -120,11 +122,11 @@ class Discriminator(nnx.Module):
 
     def _input(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
         b, t, r = pose_BxTxR.shape
-        if t != self.seq_len or r != 3 * self.num_joints or root_vel_BxTx3.shape != (b, t, 3):
+        if t != self.seq_len or r != 3 * self.num_rel_joints or root_vel_BxTx3.shape != (b, t, 3):
             raise ValueError(
-                f"D built for T={self.seq_len}, {self.num_joints} joints; got root velocity "
+                f"D built for T={self.seq_len}, {self.num_rel_joints} joints; got root velocity "
                 f"{root_vel_BxTx3.shape} and pose {pose_BxTxR.shape}")
-        x = jnp.stack([jnp.tile(root_vel_BxTx3, (1, 1, self.num_joints)), pose_BxTxR], axis=-1)
+        x = jnp.stack([jnp.tile(root_vel_BxTx3, (1, 1, self.num_rel_joints)), pose_BxTxR], axis=-1)
         return jnp.pad(x, ((0, 0), (0, 0), (0, PADDED_ROWS - r), (0, 0)))
 
     def features(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,

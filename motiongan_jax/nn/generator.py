@@ -1,26 +1,26 @@
-"""Generator G (spec §3.4): curve velocity + style code w -> root velocity and pose rows.
+"""Generator G (docs/DESIGN.md §3.4): curve velocity + style code w -> root velocity and pose rows.
 
 Layout NHWC = (B, T, W, C). The input velocity B x T x 3 enters as one channel over 3 width
 rows. Every block is conv -> LeakyReLU -> AdaIN(w); the same w feeds all 14 AdaINs. The two
 heads have neither. Skips are taken after AdaIN and tiled along the width, encoder first.
-The reference's unused `dc0_1` is not built.
+The reference's unused `dc0_1` is not built. c = `base_channels` (model.top), kt the time kernel.
 
-    ec0_0  conv kt×1           1 -> top        T     × 3
-    ec1_0  conv kt×3 /(2,3)  top -> 2top       T/2   × 1
-    ec1_1  conv kt×1        2top -> 2top       T/2   × 1   e1
-    ec2_0  conv kt×1 /(2,1) 2top -> 4top       T/4   × 1
-    ec2_1  conv kt×1        4top -> 4top       T/4   × 1   e2
-    ec3_0  conv kt×1 /(2,1) 4top -> 8top       T/8   × 1
-    ec3_1  conv kt×1        8top -> 8top       T/8   × 1
-    dc_bottom tconv kt×3    8top -> 8top       T/8   × 3,  up x2 in time
-    dc3_1  tconv kt×3       8top -> 8top       T/4   × 9
-    dc3_0  conv kt×3 (w-reflect 1) -> 4top     T/4   × 9   d2; [e2 tiled, d2], up
-    dc2_1  tconv kt×3       8top -> 4top       T/2   × 27
-    dc2_0  conv kt×3 (w-reflect 1) -> 2top     T/2   × 27  d1; keep J columns; [e1 tiled, d1], up
-    dc1_1  tconv kt×3       4top -> 2top       T     × 3J
-    dc1_0  conv kt×3 (w-reflect 1) -> top      T     × 3J  d0
-    c_traj conv kt×3J        top -> 3          T     × 1   -> root velocity B x T x 3
-    dc0_0  conv kt×1         top -> 1          T     × 3J  -> pose B x T x 3J
+    ec0_0  conv kt×1                 1 -> c    T     × 3
+    ec1_0  conv kt×3 /(2,3)          c -> 2c   T/2   × 1
+    ec1_1  conv kt×1                2c -> 2c   T/2   × 1   e1
+    ec2_0  conv kt×1 /(2,1)         2c -> 4c   T/4   × 1
+    ec2_1  conv kt×1                4c -> 4c   T/4   × 1   e2
+    ec3_0  conv kt×1 /(2,1)         4c -> 8c   T/8   × 1
+    ec3_1  conv kt×1                8c -> 8c   T/8   × 1
+    dc_bottom tconv kt×3            8c -> 8c   T/8   × 3,  up x2 in time
+    dc3_1  tconv kt×3               8c -> 8c   T/4   × 9
+    dc3_0  conv kt×3 (w-reflect 1)  8c -> 4c   T/4   × 9   d2; [e2 tiled, d2], up
+    dc2_1  tconv kt×3               8c -> 4c   T/2   × 27
+    dc2_0  conv kt×3 (w-reflect 1)  4c -> 2c   T/2   × 27  d1; keep J columns; [e1 tiled, d1], up
+    dc1_1  tconv kt×3               4c -> 2c   T     × 3J
+    dc1_0  conv kt×3 (w-reflect 1)  2c -> c    T     × 3J  d0
+    c_traj conv kt×3J                c -> 3    T     × 1   -> root velocity B x T x 3
+    dc0_0  conv kt×1                 c -> 1    T     × 3J  -> pose B x T x 3J
 
 Fewer than 27 joints (Bandai has 20). The decoder's width goes 1 -> 3 -> 9 -> 27, one column per
 joint slot at the 27-column stage. For J < 27 joints we keep the first J columns of d1 (after
@@ -29,46 +29,32 @@ works on exactly 3J rows and c_traj's kernel is kt × 3J. Joint k ≥ 1 still ow
 its position in the row layout gives it in the paper's grouping. For J = 27 the crop is the
 identity and the network is the paper's. J > 27 would need another width stage: rejected.
 
-Output prior (model.output_prior = "rest_and_curve", small configs only; off in the paper's G):
-the pose head adds the skeleton's rest pose (`rest_pose_R`, metres) and the root-velocity head
-adds the input curve velocity. The parameters are the same; G starts as a rest-pose skeleton
-gliding along the curve instead of a collapsed one standing still.
+Options of the small configs (the paper's G has none of them; docs/RESULTS.md §5-§10 says
+why each was added and what it changed). None adds parameters except the stride head.
 
-Curve frame (model.g_frame = "curve", small configs only; "world" is the paper's G): G works in
-the walker's own frame instead of the world's. Its input is each curve velocity seen from the
-heading of the previous one, u[t] = R(-θ[t-1]) v[t] (forward speed and turn, the same for every
-world rotation of the curve), and its outputs, root velocity and pose (with the rest pose prior,
-which faces +z), are turned by the smoothed heading θs[t] of the curve (`curves.smooth_heading`)
-before the world curve velocity is added. So rotating the curve rotates the motion exactly, and
-the network need not learn to turn the body to the path for every direction the rotation
-augmentation draws: with the world frame, the cpu config's bodies still faced a median 77
-degrees away from their path after 6,000 steps (docs/RESULTS.md §5). Same parameters.
+* Output prior (model.output_prior = "rest_and_curve"): the pose head adds the skeleton's rest
+  pose (`rest_pose_R`, metres) and the root head the input curve velocity, so G starts as a rest
+  pose gliding along the curve instead of a collapsed body standing still.
+* Curve frame (model.g_frame = "curve"): G works in the walker's frame. Its input is each curve
+  velocity seen from the previous one's heading, u[t] = R(-θ[t-1]) v[t]; its outputs are turned
+  by the curve's smoothed heading (`curves.smooth_heading`) before the world curve velocity is
+  added. Rotating the curve rotates the motion exactly, so G need not learn every direction
+  the rotation augmentation draws.
+* Exact bones (model.exact_bones): the pose head's bones keep their directions and take the
+  skeleton's lengths, joint by joint from the root (`project_bones`), so no head of D can be
+  answered with a stretched body.
+* Gait phase (model.gait_phase): an equal-arc-length curve is nearly constant on straight
+  stretches, so a convolutional G has nothing to hang a gait cycle on. With the option G keeps
+  a clock in walked distance, φ[t] = φ0 + 2π s[t] / λ(w) (`walked_phase`), λ(w) the style's
+  stride length from `stride_head` (trained on strides measured on real clips,
+  `losses.stride_loss`), φ0 random per training sample (`step.sample_phase`), 0 at generation.
+  sin and cos of φ and 2φ (`gait_phase`) enter ec0_0, the skips e1 and e2 and dc1_0's input.
+  A clock in distance stays right under the FPS augmentation.
+* Root height (model.root_height): the root head's y channel is the root's height (up to a
+  constant), and the y velocity G returns is its difference, so a small bias cannot drift the
+  body off the floor along a long curve.
 
-Exact bones (model.exact_bones, small configs only; the paper's G has only the bone loss): the
-pose head's bones keep their directions and take the skeleton's lengths, joint by joint from the
-root, p[b] = p[a] + L_ab (r[b] - r[a]) / |r[b] - r[a]| for raw rows r. A pose whose bones already
-have the right lengths is unchanged; bone lengths cannot drift, so neither D's class head nor
-its real/fake head can be answered with a stretched body.
-
-Gait phase (model.gait_phase, small configs; off in the paper's G): G's input, a curve resampled
-at equal arc length, is nearly constant on straight stretches and G is convolutional, so it has
-nothing to hang a gait cycle on and makes a phase-averaged body gliding forward. With the option
-G keeps a clock in walked distance: φ[t] = φ0 + 2π s[t] / λ(w), s[t] the distance walked along
-the curve, λ(w) = exp(stride_head(w)) metres the stride length of the style (one left and one
-right step), φ0 a phase offset (random per training sample, `step.sample_phase`; 0 unless given
-at generation). sin and cos of φ and 2φ (`gait_phase`) enter ec0_0 beside the velocity, join the
-skips e1 and e2 at their rates and the input of dc1_0 at full rate, so every decoder level can
-place the feet by phase. The clock depends on distance, not time, so it stays right under the
-FPS augmentation (a faster playback walks the same strides in fewer samples) and rotates with
-nothing. The stride head is trained to each style's stride length measured on the real training
-clips (`losses.stride_loss`), so cadence follows the style and the curve's speed.
-
-Root height (model.root_height, small configs; off in the paper's G): the root head's y channel is
-the root's height (up to a constant) instead of its vertical velocity, and the y velocity G
-returns is its difference. An integrated velocity lets a small bias drift the body off the floor
-over a long curve; a height cannot drift.
-
-Init: convs and tconvs N(0, 0.02²), zero bias (spec §3.1); AdaIN and the Latent Transform as in
+Init: convs and tconvs N(0, 0.02²), zero bias (DESIGN.md §3.1); AdaIN and the Latent Transform as in
 their modules. The Latent Transform lives inside G (it is trained with G's optimiser).
 
 `impl="fast"` (default) computes the same function with less work (docs/PERFORMANCE.md):
@@ -141,12 +127,12 @@ class StyledBlock(nnx.Module):
         self.conv = conv
         self.adain = AdaIN(channels, w_dim, rngs=rngs)
 
-    def activate(self, h_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
+    def activate(self, h_BxTxWxC: jax.Array, w_BxD: jax.Array) -> jax.Array:
         """LeakyReLU then AdaIN(w) of the conv's output."""
-        return self.adain(leaky_relu(h_BxTxWxC), w_BxW)
+        return self.adain(leaky_relu(h_BxTxWxC), w_BxD)
 
-    def __call__(self, x_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
-        return self.activate(self.conv(x_BxTxWxC), w_BxW)
+    def __call__(self, x_BxTxWxC: jax.Array, w_BxD: jax.Array) -> jax.Array:
+        return self.activate(self.conv(x_BxTxWxC), w_BxD)
 
 
 def _tile_w(x_BxTx1xC: jax.Array, width: int) -> jax.Array:
@@ -160,10 +146,10 @@ class Generator(nnx.Module):
 
     def __init__(
         self,
-        num_joints: int = 27,
+        num_rel_joints: int = 27,
         *,
-        top: int = 64,
-        kw: int = 5,
+        base_channels: int = 64,
+        kt: int = 5,
         w_dim: int = 64,
         z_dim: int = 64,
         num_styles: int,
@@ -179,12 +165,12 @@ class Generator(nnx.Module):
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
     ):
-        if not 1 <= num_joints <= MAX_JOINTS:
-            raise ValueError(f"num_joints must be in 1..{MAX_JOINTS}, got {num_joints}")
-        if kw % 2 != 1:
-            raise ValueError(f"kw must be odd, got {kw}")
-        self.num_joints = num_joints
-        self.num_rows = 3 * num_joints
+        if not 1 <= num_rel_joints <= MAX_JOINTS:
+            raise ValueError(f"num_rel_joints must be in 1..{MAX_JOINTS}, got {num_rel_joints}")
+        if kt % 2 != 1:
+            raise ValueError(f"the time kernel kt must be odd, got {kt}")
+        self.num_rel_joints = num_rel_joints
+        self.num_rows = 3 * num_rel_joints
         self.impl = impl
         # activations' dtype; parameters, normalisation statistics and outputs stay float32
         self.compute_dtype = str(jnp.dtype(compute_dtype))
@@ -202,7 +188,7 @@ class Generator(nnx.Module):
         self.frame = frame
         if bones is not None:
             bones = tuple((int(a), int(b), float(length)) for a, b, length in bones)
-            if sorted(b for _, b, _ in bones) != list(range(1, num_joints + 1)) or any(a >= b for a, b, _ in bones):
+            if sorted(b for _, b, _ in bones) != list(range(1, num_rel_joints + 1)) or any(a >= b for a, b, _ in bones):
                 raise ValueError("bones must be (parent, child, length) with each joint 1..J a child once, "
                                  "parents before children")
         self.bones = bones  # static: part of the graph definition
@@ -211,13 +197,14 @@ class Generator(nnx.Module):
         self.latent = LatentTransform(num_styles, z_dim=z_dim, w_dim=w_dim, init=latent_init, rngs=rngs)
 
         def conv(cin, cout, kwidth=1, stride=(1, 1), pad_w=0):
-            return StyledBlock(Conv(cin, cout, (kw, kwidth), stride, pad_w=pad_w, impl=impl, rngs=rngs),
+            return StyledBlock(Conv(cin, cout, (kt, kwidth), stride, pad_w=pad_w, impl=impl, rngs=rngs),
                                cout, w_dim, rngs=rngs)
 
         def tconv(cin, cout):
-            return StyledBlock(ConvTranspose(cin, cout, (kw, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
+            return StyledBlock(ConvTranspose(cin, cout, (kt, 3), impl=impl, rngs=rngs), cout, w_dim, rngs=rngs)
 
-        t1, t2, t4, t8 = top, 2 * top, 4 * top, 8 * top
+        c = base_channels
+        t1, t2, t4, t8 = c, 2 * c, 4 * c, 8 * c
         ph = PHASE_CHANNELS if self.gait_phase else 0
         self.ec0_0 = conv(1 + ph, t1)
         self.ec1_0 = conv(t1, t2, 3, (2, 3))
@@ -233,8 +220,8 @@ class Generator(nnx.Module):
         self.dc2_0 = conv(t4, t2, 3, pad_w=1)
         self.dc1_1 = tconv(t2 + ph + t2, t2)
         self.dc1_0 = conv(t2 + ph, t1, 3, pad_w=1)
-        self.c_traj = Conv(t1, 3, (kw, self.num_rows), impl=impl, rngs=rngs)
-        self.dc0_0 = Conv(t1, 1, (kw, 1), impl=impl, rngs=rngs)
+        self.c_traj = Conv(t1, 3, (kt, self.num_rows), impl=impl, rngs=rngs)
+        self.dc0_0 = Conv(t1, 1, (kt, 1), impl=impl, rngs=rngs)
         # log stride length (metres) of the style; zero init: 1 m strides until trained
         self.stride_head = (Dense(w_dim, 1, kernel_init=zeros_init, bias_init=zeros_init, rngs=rngs)
                             if self.gait_phase else None)
@@ -243,17 +230,17 @@ class Generator(nnx.Module):
         """The style code w (B x w_dim) of the Latent Transform."""
         return self.latent(labels_B, z_BxZ)
 
-    def log_stride(self, w_BxW: jax.Array) -> jax.Array:
+    def log_stride(self, w_BxD: jax.Array) -> jax.Array:
         """log of the stride length λ(w) in metres (B), for a G with a gait phase."""
         if self.stride_head is None:
             raise ValueError("this G has no gait phase (model.gait_phase)")
-        return STRIDE_GAIN * self.stride_head(w_BxW)[:, 0]
+        return STRIDE_GAIN * self.stride_head(w_BxD)[:, 0]
 
-    def adain_styles(self, w_BxW: jax.Array) -> dict[str, tuple[jax.Array, jax.Array]]:
+    def adain_styles(self, w_BxD: jax.Array) -> dict[str, tuple[jax.Array, jax.Array]]:
         """(scale, bias) of every AdaIN layer for a style code, keyed by block name."""
-        return {name: getattr(self, name).adain.style(w_BxW) for name in self.BLOCKS}
+        return {name: getattr(self, name).adain.style(w_BxD) for name in self.BLOCKS}
 
-    def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array,
+    def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array,
                      phase_offset_B: jax.Array | None = None) -> jax.Array:
         """B x T: the phase this G walks a curve with (`walked_phase` at its stride λ(w), offset
         default 0)."""
@@ -261,10 +248,10 @@ class Generator(nnx.Module):
         offset_B = jnp.zeros((b,), jnp.float32) if phase_offset_B is None else phase_offset_B
         # the stride is learned from measured strides alone (losses.stride_loss): the GAN's
         # gradient through sin(2π s / λ) is periodic in 1/λ and would only add noise
-        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxW)))
+        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxD)))
         return walked_phase(curve_vel_BxTx3, stride_B, offset_B)
 
-    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxW: jax.Array, phase_offset_B: jax.Array | None = None,
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array, phase_offset_B: jax.Array | None = None,
                  phase_BxT: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
         """(root_vel_BxTx3, pose_BxTxR). A G with a gait phase walks with `self.walked_phase`
         (`phase_offset_B` radians, default 0), or with the given `phase_BxT` (radians: a real
@@ -272,7 +259,7 @@ class Generator(nnx.Module):
         t = curve_vel_BxTx3.shape[1]
         if t % 8:
             raise ValueError(f"G needs T divisible by 8, got T={t}")
-        w = w_BxW
+        w = w_BxD
 
         def block(name, x):
             with jax.named_scope(name):  # names the ops in profiles (bench/bench_profile.py)
@@ -296,7 +283,7 @@ class Generator(nnx.Module):
         phase_BxTx1xP = None
         if self.gait_phase:
             if phase_BxT is None:
-                phase_BxT = self.walked_phase(curve_vel_BxTx3, w_BxW, phase_offset_B)
+                phase_BxT = self.walked_phase(curve_vel_BxTx3, w_BxD, phase_offset_B)
             phase_BxTx1xP = gait_phase(phase_BxT)[:, :, None, :].astype(self.compute_dtype)
             x = jnp.concatenate([x, jnp.broadcast_to(phase_BxTx1xP, (b, t, 3, PHASE_CHANNELS))], -1)
         elif phase_offset_B is not None or phase_BxT is not None:
@@ -321,7 +308,7 @@ class Generator(nnx.Module):
         x = up_block("dc3_1", block("dc_bottom", x))
         d2 = block("dc3_0", x)
         x = up_block("dc2_1", d2, with_phase(e2, 4))
-        d1 = block("dc2_0", x)[:, :, : self.num_joints]
+        d1 = block("dc2_0", x)[:, :, : self.num_rel_joints]
         x = up_block("dc1_1", d1, with_phase(e1, 2))
         d0 = block("dc1_0", with_phase(x, 1))
 

@@ -1,13 +1,13 @@
-"""Latent Transform: style label + z -> style code w (spec §3.3).
+"""Latent Transform: style label + z -> style code w (docs/DESIGN.md §3.3).
 
     w = MLP5(PixelNorm([z, E[label]]))   (all five layers followed by LeakyReLU 0.01)
 
 Init. The embedding E (C x z_dim) is N(0, 1) (nn.Embedding default). The five 1x1 convs use
-N(0, 0.02²) weights and zero biases. The spec does not name this init, but it states its effect:
-|w| ≈ 2e-5 at initialisation (§3.2, §6 item 15). That magnitude is what N(0, 0.02²) with zero
+N(0, 0.02²) weights and zero biases. The reference does not name this init, but its w is
+|w| ≈ 2e-5 at initialisation (DESIGN.md §3.2, §6). That magnitude is what N(0, 0.02²) with zero
 bias gives through five layers (each layer multiplies the second moment by about
 fan_in · 0.02² / 2 ≈ 0.013), whereas PyTorch's default U(±1/sqrt(fan_in)) init would give
-|w| ≈ 0.1. We keep the spec's tiny w: with it the AdaIN scales start at their biases a_s and
+|w| ≈ 0.1. We keep the reference's tiny w: with it the AdaIN scales start at their biases a_s and
 the style label barely changes G's output at initialisation (tests/test_nn.py checks both).
 `init="torch_default"` (config `model.latent_init`) uses PyTorch's default U(±1/sqrt(fan_in))
 weights and biases instead, so w starts at |w| ~ 0.1 and the style path is not starved early:

@@ -1,10 +1,10 @@
-"""Building blocks shared by G, D and the Latent Transform (spec §3.1, §3.2).
+"""Building blocks shared by G, D and the Latent Transform (docs/DESIGN.md §3.1, §3.2).
 
 Layout is NHWC = (B, T, W, C): time is axis 1, the joint-coordinate rows are axis 2.
 Parameters are stored so that they map 1:1 onto the PyTorch reference:
 
-* `Conv.kernel`          (kt, kw, in, out)  = torch Conv2d weight (out, in, kt, kw).transpose(2, 3, 1, 0)
-* `ConvTranspose.kernel` (kt, kw, in, out)  = torch ConvTranspose2d weight (in, out, kt, kw).transpose(2, 3, 0, 1)
+* `Conv.kernel`          (kt, kwidth, in, out)  = torch Conv2d weight (out, in, kt, kwidth).transpose(2, 3, 1, 0)
+* `ConvTranspose.kernel` (kt, kwidth, in, out)  = torch ConvTranspose2d weight (in, out, kt, kwidth).transpose(2, 3, 0, 1)
 * `Dense.kernel`         (in, out)          = torch weight (out, in).T (1x1 convs included)
 
 Spectral norm is our own (`SpectralNorm`): it keeps the raw weight as the trainable `nnx.Param`
@@ -155,7 +155,7 @@ def _l2_normalize(x: jax.Array, eps: float = SN_EPS) -> jax.Array:
 class SpectralNorm(nnx.Module):
     """σ(W) by power iteration with PyTorch's `spectral_norm` semantics.
 
-    W is the weight as a (out, in·kh·kw) matrix in PyTorch order. u (out,) and v (in·kh·kw,) start
+    W is the weight as a (out, in·kt·kwidth) matrix in PyTorch order. u (out,) and v (in·kt·kwidth,) start
     as normalised N(0, 1) draws. With `update_stats=True` one iteration runs:
     v ← normalize(Wᵀu), u ← normalize(Wv), both stored. σ = uᵀWv; no gradient flows into u or v,
     so dσ/dW = u vᵀ as in PyTorch. The caller divides its raw weight by σ; the raw weight is
@@ -185,7 +185,7 @@ class SpectralNorm(nnx.Module):
 class Conv(nnx.Module):
     """Reflect-pad (kt//2 frames each side in time, `pad_w` rows in width), then a VALID conv.
 
-    Init: weight N(0, 0.02²), bias 0 (spec §3.1). `spectral_norm=True` divides the kernel by
+    Init: weight N(0, 0.02²), bias 0 (DESIGN.md §3.1). `spectral_norm=True` divides the kernel by
     σ from `SpectralNorm` on every call.
     """
 
@@ -201,14 +201,14 @@ class Conv(nnx.Module):
         impl: str = "fast",
         rngs: nnx.Rngs,
     ):
-        kt, kw = kernel_size
+        kt, kwidth = kernel_size
         self.impl = impl
         self.stride = tuple(stride)
         self.pad_t = kt // 2
         self.pad_w = pad_w
-        self.kernel = nnx.Param(normal_init(0.02)(rngs.params(), (kt, kw, in_ch, out_ch)))
+        self.kernel = nnx.Param(normal_init(0.02)(rngs.params(), (kt, kwidth, in_ch, out_ch)))
         self.bias = nnx.Param(jnp.zeros((out_ch,)))
-        self.sn = SpectralNorm(out_ch, in_ch * kt * kw, rngs=rngs) if spectral_norm else None
+        self.sn = SpectralNorm(out_ch, in_ch * kt * kwidth, rngs=rngs) if spectral_norm else None
 
     def weight(self, *, update_stats: bool = False) -> jax.Array:
         """The kernel actually applied (W/σ under spectral norm)."""
@@ -310,12 +310,12 @@ def upsampled_tconv(x_BxTxWxC: jax.Array, taps: list[jax.Array], *, impl: str = 
 
 
 class ConvTranspose(nnx.Module):
-    """PyTorch ConvTranspose2d kernel (kt, kw), stride (1, kw), no padding, then a crop of kt//2
-    frames from each end of time: T is kept, the width is multiplied by kw (spec §3.1).
+    """PyTorch ConvTranspose2d kernel (kt, kwidth), stride (1, kwidth), no padding, then a crop of kt//2
+    frames from each end of time: T is kept, the width is multiplied by kwidth (DESIGN.md §3.1).
 
-    Because the width stride equals the width kernel, each input column owns its kw output
+    Because the width stride equals the width kernel, each input column owns its kwidth output
     columns; with stride 1 in time the crop turns the transposed conv into a zero-padded
-    correlation with the time-flipped kernel. So it runs as one ordinary conv with kw·out output
+    correlation with the time-flipped kernel. So it runs as one ordinary conv with kwidth·out output
     channels, reshaped into width. Tested against an explicit loop and lax.conv_transpose.
     Init: N(0, 0.02²), bias 0.
 
@@ -325,16 +325,16 @@ class ConvTranspose(nnx.Module):
 
     def __init__(self, in_ch: int, out_ch: int, kernel_size: tuple[int, int], *, impl: str = "fast",
                  rngs: nnx.Rngs):
-        kt, kw = kernel_size
+        kt, kwidth = kernel_size
         self.impl = impl
-        self.kernel = nnx.Param(normal_init(0.02)(rngs.params(), (kt, kw, in_ch, out_ch)))
+        self.kernel = nnx.Param(normal_init(0.02)(rngs.params(), (kt, kwidth, in_ch, out_ch)))
         self.bias = nnx.Param(jnp.zeros((out_ch,)))
 
     def _conv_kernel(self) -> jax.Array:
-        """kt x 1 x in x (kw·out): the time-flipped kernel of the equivalent correlation."""
+        """kt x 1 x in x (kwidth·out): the time-flipped kernel of the equivalent correlation."""
         kernel = self.kernel[...]
-        kt, kw, cin, cout = kernel.shape
-        return jnp.transpose(kernel[::-1], (0, 2, 1, 3)).reshape(kt, 1, cin, kw * cout)
+        kt, kwidth, cin, cout = kernel.shape
+        return jnp.transpose(kernel[::-1], (0, 2, 1, 3)).reshape(kt, 1, cin, kwidth * cout)
 
     def _to_width(self, y_BxTxWxO: jax.Array) -> jax.Array:
         b, t, w, _ = y_BxTxWxO.shape
@@ -348,7 +348,7 @@ class ConvTranspose(nnx.Module):
         return self._to_width(y)
 
     def upsampled(self, d_BxTxWxCd: jax.Array, e_BxTx1xCe: jax.Array | None = None) -> jax.Array:
-        """self(upsample_time2(concat[tile(e, W), d])) without building that input (B x 2T x kw·W x out).
+        """self(upsample_time2(concat[tile(e, W), d])) without building that input (B x 2T x kwidth·W x out).
 
         * Skip (e): a tiled e is constant along the width and each input column owns its output
           columns, so e's share is computed once, on one column, and broadcast to all W.
@@ -356,13 +356,13 @@ class ConvTranspose(nnx.Module):
           correlation of the original samples (`upsampled_tconv`).
         """
         kernel = self.kernel[...].astype(d_BxTxWxCd.dtype)
-        kt, kw, cin, cout = kernel.shape
+        kt, kwidth, cin, cout = kernel.shape
         ce = 0 if e_BxTx1xCe is None else e_BxTx1xCe.shape[-1]
         if ce + d_BxTxWxCd.shape[-1] != cin:
             raise ValueError(f"{ce} + {d_BxTxWxCd.shape[-1]} input channels, kernel has {cin}")
 
-        def taps(lo, hi):  # correlation taps (C x kw·out): time-flipped, like _conv_kernel
-            return [jnp.transpose(kernel[kt - 1 - i, :, lo:hi], (1, 0, 2)).reshape(hi - lo, kw * cout)
+        def taps(lo, hi):  # correlation taps (C x kwidth·out): time-flipped, like _conv_kernel
+            return [jnp.transpose(kernel[kt - 1 - i, :, lo:hi], (1, 0, 2)).reshape(hi - lo, kwidth * cout)
                     for i in range(kt)]
 
         def part(x, lo, hi):
@@ -417,17 +417,17 @@ def torch_default_dense(in_features: int, out_features: int, *, rngs: nnx.Rngs) 
 class AdaIN(nnx.Module):
     """instance_norm(h) · s + b with s = A_s w + a_s (used directly, no 1+s), b = A_b w + a_b.
 
-    Init (spec §3.2): A_s, a_s PyTorch default U(±1/sqrt(w_dim)); A_b N(0, 0.02²), a_b 0.
+    Init (DESIGN.md §3.2): A_s, a_s PyTorch default U(±1/sqrt(w_dim)); A_b N(0, 0.02²), a_b 0.
     """
 
     def __init__(self, channels: int, w_dim: int, *, rngs: nnx.Rngs):
         self.scale = torch_default_dense(w_dim, channels, rngs=rngs)
         self.shift = Dense(w_dim, channels, kernel_init=normal_init(0.02), bias_init=zeros_init, rngs=rngs)
 
-    def style(self, w_BxW: jax.Array) -> tuple[jax.Array, jax.Array]:
+    def style(self, w_BxD: jax.Array) -> tuple[jax.Array, jax.Array]:
         """(s_BxC, b_BxC) for a style code; the analysis tools read these."""
-        return self.scale(w_BxW), self.shift(w_BxW)
+        return self.scale(w_BxD), self.shift(w_BxD)
 
-    def __call__(self, h_BxTxWxC: jax.Array, w_BxW: jax.Array) -> jax.Array:
-        s, b = self.style(w_BxW)
+    def __call__(self, h_BxTxWxC: jax.Array, w_BxD: jax.Array) -> jax.Array:
+        s, b = self.style(w_BxD)
         return modulated_instance_norm(h_BxTxWxC, s, b)
