@@ -138,6 +138,8 @@ def write_file_lists(out_dir: str | Path, train, val, root: str | Path | None = 
 # ----------------------------------------------------------------------------------------------
 
 def cache_root() -> Path:
+    """Where preprocessed clips and the generated embedded dataset live: $MOTIONGAN_CACHE,
+    default ~/.cache/motiongan_jax."""
     return Path(os.environ.get("MOTIONGAN_CACHE", Path.home() / ".cache" / "motiongan_jax"))
 
 
