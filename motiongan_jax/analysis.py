@@ -493,7 +493,7 @@ def windows_from_rows(root_Fx3, pose_FxR, *, T: int, frame_step: int, interval: 
     path_frames = starts[:, None] + np.arange(span)[None, :]
     xz = _clean_curves(root[path_frames][..., [0, 2]], np.full(count, span, np.int32), T=int(T),
                        interval=int(interval))
-    curve = jnp.stack([xz[..., 0], jnp.zeros_like(xz[..., 0]), xz[..., 1]], axis=-1)
+    curve = curves.on_floor(xz)
     return MotionWindows(jnp.asarray(root[frames]), jnp.asarray(pose[frames]), curve.astype(jnp.float32),
                          starts, int(frame_step), source)
 
@@ -774,7 +774,7 @@ def generate_along(state, layout: RowLayout, w_W, curve_xz_Px2, *, spacing_m: fl
         raise AnalysisError(f"the curve gives {len(xz)} samples at {spacing_m:.3g} m per sample; G "
                             f"needs at least 16 (draw a longer curve)")
     xz = xz[:T]
-    curve = np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], axis=-1).astype(np.float32)
+    curve = curves.on_floor(xz).astype(np.float32)
     root_vel, pose = apply_code(state, curves.velocity(jnp.asarray(curve)[None]), np.reshape(w_W, (1, -1)))
     start = jnp.asarray([[curve[0, 0], start_height_m, curve[0, 2]]], jnp.float32)
     root = curves.integrate(start, root_vel)[0]

@@ -3,8 +3,8 @@
 Units are metres, Y up, floor = X-Z plane; every 2-D curve here is (x, z).
 
 Training hot path (pure jnp, jit-able, batched): `window_curves`. Whole clips and user curves
-(numpy around the same spline core): `floor_path`, `spline_curve`, `resample_polyline`,
-`load_curve_file`, `curve_from_root_positions`, `shape_curve`, `check_curve`.
+(numpy around the same spline core): `floor_path` (and back: `on_floor`), `spline_curve`,
+`resample_polyline`, `load_curve_file`, `curve_from_root_positions`, `shape_curve`, `check_curve`.
 Network-side helpers (CONTRACTS.md): `velocity`, `integrate`, and `rotate_y` for augmentation.
 
 Spline (spec §2.6, with the reference's bugs fixed):
@@ -314,6 +314,13 @@ def floor_path(root_Fx3):
     return root_Fx3[..., 0::2]
 
 
+def on_floor(xz_x2):
+    """Floor points (..., 2) as (x, 0, z) (..., 3), the inverse of `floor_path`; numpy stays
+    numpy (its dtype kept), anything else becomes jnp."""
+    xp = np if isinstance(xz_x2, np.ndarray) else jnp
+    return xp.stack([xz_x2[..., 0], xp.zeros_like(xz_x2[..., 0]), xz_x2[..., 1]], axis=-1)
+
+
 def check_curve(points, what: str = "curve") -> np.ndarray:
     """Validates a user curve and returns it as a (P, 2) float64 array.
 
@@ -415,12 +422,13 @@ def resample_polyline(points_Px2, num_points: int | None = None, spacing: float 
     return np.asarray(_eval_spline_jit(spline, x[None], interval=interval)[0], dtype=np.float64)
 
 
-def curve_from_bvh(path, units_to_m: float | None = None) -> np.ndarray:
-    """The floor path (metres) of a BVH file's root (the representation root: the pelvis).
-    Units default to a guess from the skeleton's leg length (CMU units, cm, inches or m)."""
+def curve_from_bvh(path_or_motion, units_to_m: float | None = None) -> np.ndarray:
+    """The floor path (metres) of a BVH file's root (the representation root: the pelvis), from
+    its path or an already read `bvh.Motion`. Units default to a guess from the skeleton's leg
+    length (CMU units, cm, inches or m)."""
     from motiongan_jax import bvh, kinematics, representation
 
-    motion = bvh.read_bvh(path)
+    motion = path_or_motion if isinstance(path_or_motion, bvh.Motion) else bvh.read_bvh(path_or_motion)
     units = representation.guess_units_to_m(motion.skeleton) if units_to_m is None else units_to_m
     root = representation.representation_root(motion.skeleton)
     return curve_from_root_positions(kinematics.world_positions(motion)[:, root] * units)

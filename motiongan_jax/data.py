@@ -462,7 +462,7 @@ def make_sample_batch(cfg: DataConfig, batch_size: int):
         path_xz = arrays.root_Nx3[path_frames][..., jnp.array([0, 2])]
         curve_xz = curves.window_curves(path_xz, length_B, T, cfg.control_point_interval,
                                         cfg.curve_noise, k_curve)
-        curve = jnp.stack([curve_xz[..., 0], jnp.zeros_like(curve_xz[..., 0]), curve_xz[..., 1]], -1)
+        curve = curves.on_floor(curve_xz)
         if cfg.rotate:
             theta_B = jax.random.uniform(k_rot, (batch_size,), maxval=2 * jnp.pi)
             root = curves.rotate_y(root, theta_B[:, None])

@@ -401,13 +401,11 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
         raise GenerateError(f"curve file {path}: {size / 2**20:.0f} MiB is larger than the limit of "
                             f"{MAX_CURVE_FILE_BYTES / 2**20:.0f} MiB (generate.MAX_CURVE_FILE_BYTES)")
     if path.suffix.lower() == ".bvh":
-        from motiongan_jax import bvh, kinematics, representation
+        from motiongan_jax import bvh
 
         motion = bvh.read_bvh(path)
         _check_points(motion.num_frames, f"curve {path.name}")
-        units = representation.guess_units_to_m(motion.skeleton)
-        root = representation.representation_root(motion.skeleton)
-        pts = curves.curve_from_root_positions(kinematics.world_positions(motion)[:, root] * units)
+        pts = curves.curve_from_bvh(motion)
         check_curve_limits(pts, f"curve {path.name}")
         frames = len(pts)
         seconds = (frames - 1) * motion.frame_time
@@ -489,7 +487,7 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
         note += f"; in overlapping chunks of {CHUNK_T} samples"
     if log is not None:
         log(note)
-    return np.stack([xz[:, 0], np.zeros(M), xz[:, 1]], -1).astype(np.float32)
+    return curves.on_floor(xz).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -22,6 +22,8 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
+from motiongan_jax import representation
+
 # Reference foot-skate threshold (§5.6): 0.5 CMU units per 15 Hz sample, in metres.
 CMU_UNIT_M = 0.056444
 FOOT_SKATE_THRESHOLD_M = 0.5 * CMU_UNIT_M
@@ -337,7 +339,7 @@ def bone_length_error(joints_TxJx3, bone_pairs_Bx2, target_lengths_B) -> float:
     targets = _float_array(target_lengths_B, "target_lengths_B", 1, shape=(pairs.shape[0],))
     if np.any(targets <= 0):
         raise ValueError("target_lengths_B: lengths must be > 0")
-    lengths_TxB = np.linalg.norm(joints[:, pairs[:, 1]] - joints[:, pairs[:, 0]], axis=-1)
+    lengths_TxB = representation.joint_bone_lengths(joints, pairs)
     return float(np.mean(np.abs(lengths_TxB - targets) / targets))
 
 

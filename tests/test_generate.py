@@ -510,7 +510,7 @@ def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, ca
     assert m and int(m.group(1)) == fitted.sum(), note
     assert float(m.group(3)) == pytest.approx(np.degrees(angle[:, fitted].max()), rel=0.05, abs=1e-3)
     np.testing.assert_allclose(representation.bone_lengths(
-        (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
+        (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout.bone_pairs), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
         atol=1e-6)
     # the exact form: zero-length branch joints, every bone direction exact; it reads back to the layout too
     assert cli([*common, "--out", str(tmp_path / "exact.bvh"), "--bvh-hierarchy", "exact"]) == 0
