@@ -159,6 +159,19 @@ def _grid_frames(N: int, length_B, dtype) -> jax.Array:
     return jnp.minimum(g[None, :], last[:, None])
 
 
+def window_indices(num_frames: int, T: int, frame_step: int = 1, stride: int | None = None,
+                   max_windows: int | None = None) -> np.ndarray:
+    """Frame indices (N, T) of the windows of a clip of `num_frames` frames: T samples `frame_step`
+    frames apart, one starting every `stride` frames from frame 0 (default T·frame_step: back to
+    back), every one that fits (N = 0 when none does), at most `max_windows`. The evaluation's and
+    analysis's windows; training draws its own (data.make_sample_batch)."""
+    span = (T - 1) * frame_step + 1
+    starts = np.arange(0, max(int(num_frames) - span + 1, 0), T * frame_step if stride is None else stride)
+    if max_windows is not None:
+        starts = starts[: int(max_windows)]
+    return starts[:, None] + frame_step * np.arange(T)[None, :]
+
+
 def window_curves(path_xz_BxNx2, length_B, T: int, interval: int, noise=0.0, key=None):
     """Input curves of a batch of windows: T points of equal arc length along each window's spline.
 
@@ -283,6 +296,17 @@ def heading(v_BxTx3):
     `rotate_y` turns +z into. A zero velocity gets heading 0."""
     v = jnp.asarray(v_BxTx3)
     return jnp.arctan2(v[..., 0], v[..., -1])
+
+
+def window_frame(root_vel_BxTx3, pose_BxTxR):
+    """Root velocity and pose rows turned about +y so that each window's travel, the sum of its
+    root velocities after the first (v[0] duplicates v[1], `velocity`), points along +z: D's input
+    frame (model.d_frame "window") and the evaluator's canonical frame. A window that does not
+    move keeps its orientation (heading 0)."""
+    theta_B = heading(jnp.sum(root_vel_BxTx3[:, 1:], axis=1))
+    b, t, r = pose_BxTxR.shape
+    pose = rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), -theta_B).reshape(b, t, r)
+    return rotate_y(root_vel_BxTx3, -theta_B), pose
 
 
 # Binomial smoothing of the walking direction: the training curves carry 2% spatial jitter, i.e.

@@ -510,18 +510,6 @@ def nearest_centroid_accuracy(w_NxD, labels_N, centroids_CxD) -> float:
     return float(np.mean(pred == labels))
 
 
-def explained_variance(X_NxD) -> np.ndarray:
-    """Explained-variance ratios (float64, (min(N, D),), descending, summing to 1) of the
-    principal components of X, from the singular values of the centred data. Needs N ≥ 2 and
-    some variance."""
-    X = _float_array(X_NxD, "X_NxD", 2, min_len=2)
-    s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
-    total = np.sum(s**2)
-    if total <= 0.0:
-        raise ValueError("X_NxD: all rows are identical (zero variance)")
-    return s**2 / total
-
-
 # ---------------------------------------------------------------------------------------------
 # Reporting
 
