@@ -119,6 +119,7 @@ INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 # jitted once per shape: one XLA compile of G (~3 s on CPU) instead of op-by-op dispatch (~8 s)
 _apply_g = jax.jit(lambda state, vel, w, phase: step_lib.generator_apply(state, vel, w_BxW=w, phase_offset_B=phase))
 _latent_w = jax.jit(step_lib.latent_w)
+_stride_m = jax.jit(lambda state, w: jnp.exp(step_lib.generator(state).log_stride(w)))  # λ(w), metres
 
 
 def apply_code(state, curve_vel_BxTx3, w_BxW, phase_offset_B=None):
@@ -135,7 +136,6 @@ def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
     """w = LT(label, z) for each row (B x w_dim; jitted on G's part of the state)."""
     return _latent_w(step_lib.generator_state(state), jnp.asarray(labels_B, jnp.int32),
                      jnp.asarray(z_BxZ, jnp.float32))
-_stride_m = jax.jit(lambda state, w: jnp.exp(step_lib.generator(state).log_stride(w)))  # λ(w), metres
 
 
 class GenerateError(ValueError):
@@ -342,7 +342,7 @@ def z_codes(state, z: str | int = "zero", seed: int = 0) -> np.ndarray:
 
 
 def spec_codes(state, specs: Sequence[StyleSpec], style_names: Sequence[str],
-                z_KxZ: np.ndarray | None = None) -> np.ndarray:
+               z_KxZ: np.ndarray | None = None) -> np.ndarray:
     """w (len(specs) * K, w_dim) float32: for each spec, for each of the K z codes (default one
     zero z). Every label's w is computed in one fixed batch (all labels x all z), so a style's
     w does not depend on the other specs; sums are taken in float64, so weights 1 and 0 give
@@ -637,7 +637,7 @@ def _g_outputs(state, vel_Tx3, w_BxW: np.ndarray, phase_B: np.ndarray | None, ch
         # the first velocity is not walked): a chunk starting at s starts at the phase walked by s
         step_T = np.linalg.norm(np.asarray(vel_Tx3, np.float64)[:, ::2], axis=-1)
         walked_T = np.cumsum(np.concatenate([[0.0], step_T[1:]]))
-        stride_B = np.asarray(_stride_m(state, jnp.asarray(w_BxW)), np.float64)
+        stride_B = np.asarray(_stride_m(step_lib.generator_state(state), jnp.asarray(w_BxW)), np.float64)
     total, done = -(-B // group) * len(starts), 0
     root = pose = None
     norm_T = np.zeros(T)

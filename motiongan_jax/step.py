@@ -173,9 +173,9 @@ def discriminator(state: TrainState) -> Discriminator:
 
 
 def generator_state(state: TrainState) -> TrainState:
-    """The state with only what G needs, so that jitted inference neither copies nor keys on D or
-    the optimisers."""
-    return state.replace(d_params=None, d_sn_state=None, opt_g_state=None, opt_d_state=None)
+    """The state with only what G needs (its `g_params`), so that jitted inference neither copies
+    nor keys on D, the optimisers or the moving average."""
+    return state.replace(d_params=None, d_sn_state=None, opt_g_state=None, opt_d_state=None, g_ema_params=None)
 
 
 def _zeros_z(state: TrainState, batch: int) -> jax.Array:
