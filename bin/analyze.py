@@ -62,29 +62,10 @@ def _search_curve(text: str, spacing: float, T: int):
                      ".csv/.json curve file")
 
 
-def _plain(o):
-    """Numpy values -> Python, non-finite floats -> None (strict JSON)."""
-    import math
-
-    import numpy as np
-
-    if isinstance(o, dict):
-        return {str(k): _plain(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_plain(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _plain(o.tolist())
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        o = o.item()
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    return o
-
-
 def _write_json(path: Path, obj) -> None:
-    from motiongan_jax import atomic
+    from motiongan_jax import atomic, evaluation
 
-    atomic.write_text(path, json.dumps(_plain(obj), indent=1, allow_nan=False) + "\n")
+    atomic.write_text(path, json.dumps(evaluation.to_jsonable(obj), indent=1, allow_nan=False) + "\n")
 
 
 def run(args, log=print) -> dict:
@@ -101,7 +82,7 @@ def run(args, log=print) -> dict:
     C = len(names)
     key = jax.random.key(args.seed)
     k_codes, k_search = jax.random.split(key)
-    codes = A.style_codes(state, names, args.k, k_codes, use_z=cfg.model.use_z)
+    codes = A.label_codes(state, names, args.k, k_codes, use_z=cfg.model.use_z)
     X, labels = codes.flat_samples
     p = A.pca(X)
     pts = A.pca_transform(p, X)

@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     atomic.write_text(out / "report.md", evaluation.markdown(evaluation.to_jsonable(report)))
     evaluation.plot_confusion(results["confusion_generated"], results["confusion_real"], style_names,
                               out / "confusion.png")
-    codes = analysis.style_codes(state, style_names, k=10)
+    codes = analysis.label_codes(state, style_names, k=10)
     X, y = codes.flat_samples
     p = analysis.pca(X, 2)
     viz.plot_style_pca(np.asarray(analysis.pca_transform(p, X)), np.asarray(y), style_names, out / "pca_w.png",

@@ -117,7 +117,7 @@ def main(argv=None) -> int:
         curve_M = gen_lib.prepare_curve(curve, rate, args.speed, log=_log)
         count = len(panels) * len(z)
         gen_lib.check_output_size(args.out, len(curve_M), count)  # before any work
-        w = gen_lib.style_codes(state, [s for _, s in panels], names, z)
+        w = gen_lib.spec_codes(state, [s for _, s in panels], names, z)
         titles = [t if len(z) == 1 else f"{t} z{k}" for t, _ in panels for k in range(len(z))]
         zs = [z[k] for _ in panels for k in range(len(z))]
         generated = gen_lib.generate_motion(state, layout, curve_M, w, progress=Progress())

@@ -3,9 +3,9 @@
 docs/DESIGN.md §5.2 (analysis) and §5.3 (style search), with the reference's bugs fixed (§6).
 All numerics are jnp; plots live in `viz.py`, files are written by `bin/analyze.py`.
 
-Style codes. w = LT(label, z): `style_codes` gives, for every label, w at z = 0 (what the
-inference tools use) and K codes from z ~ N(0, I) (z = 0 again when the model was trained with
-`model.use_z == "zeros"`), whose mean is the style's *centroid*.
+Style codes. w = LT(label, z) (`generate.latent_codes`): `label_codes` gives, for every label,
+w at z = 0 (what the inference tools use) and K codes from z ~ N(0, I) (z = 0 again when the
+model was trained with `model.use_z == "zeros"`), whose mean is the style's *centroid*.
 
 Blending. The AdaIN scale and bias of every layer are affine in w (s = A_s w + a_s,
 b = A_b w + a_b), so blending codes with weights that sum to 1 (`interpolate`, `mix`) gives
@@ -47,27 +47,13 @@ import numpy as np
 import optax
 from flax import nnx
 
-from motiongan_jax import curves, step as step_lib
+from motiongan_jax import curves, generate, step as step_lib
 from motiongan_jax.nn.layers import AdaIN
-from motiongan_jax.representation import RowLayout, from_rows, to_rows
+from motiongan_jax.representation import RowLayout, to_rows
 
 
 class AnalysisError(ValueError):
     """A problem with analysis inputs (a motion that does not fit the model, a short clip, ...)."""
-
-
-_apply_w = jax.jit(lambda gstate, vel, w: step_lib.generator_apply(gstate, vel, w_BxD=w))
-
-
-def _g_only(state):
-    """The state with only what G needs, so jitted functions neither copy nor key on D/optimisers."""
-    return state.replace(d_params=None, d_sn_state=None, opt_g_state=None, opt_d_state=None)
-
-
-def apply_code(state, curve_vel_BxTx3, w_BxD):
-    """(root_vel, pose) of G for style codes w (jitted; compiled once per shape: the inputs are
-    taken through numpy so that arrays from any computation share one cache entry)."""
-    return _apply_w(_g_only(state), np.asarray(curve_vel_BxTx3, np.float32), np.asarray(w_BxD, np.float32))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -92,15 +78,7 @@ class StyleCodes:
         return self.samples_CxKxD.reshape(C * K, D), jnp.repeat(jnp.arange(C, dtype=jnp.int32), K)
 
 
-_latent_w = jax.jit(step_lib.latent_w)
-
-
-def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
-    """w = LT(label, z) for each row (jitted on G's part of the state only)."""
-    return _latent_w(_g_only(state), jnp.asarray(labels_B, jnp.int32), jnp.asarray(z_BxZ, jnp.float32))
-
-
-def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None, *,
+def label_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None, *,
                 use_z: str = "transform") -> StyleCodes:
     """w at z = 0 and K codes per label (z ~ N(0, I) from `key`, default key 0)."""
     C = len(style_names)
@@ -108,13 +86,13 @@ def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array |
         raise ValueError(f"need at least one style and k >= 1 (got {C} styles, k={k})")
     Z = step_lib.generator_z_dim(state)
     labels = jnp.arange(C, dtype=jnp.int32)
-    zero = latent_codes(state, labels, jnp.zeros((C, Z), jnp.float32))
+    zero = generate.latent_codes(state, labels, jnp.zeros((C, Z), jnp.float32))
     rep = jnp.repeat(labels, k)
     if use_z == "zeros":
         z = jnp.zeros((C * k, Z), jnp.float32)
     else:
         z = jax.random.normal(jax.random.key(0) if key is None else key, (C * k, Z), jnp.float32)
-    samples = latent_codes(state, rep, z).reshape(C, k, -1)
+    samples = generate.latent_codes(state, rep, z).reshape(C, k, -1)
     chex.assert_shape(samples, (C, k, zero.shape[-1]))
     return StyleCodes(tuple(style_names), zero, samples)
 
@@ -474,18 +452,15 @@ def windows_from_rows(root_Fx3, pose_FxR, *, T: int, frame_step: int, interval: 
     pose = np.asarray(pose_FxR, np.float32)
     F = len(root)
     span = (T - 1) * frame_step + 1
-    if F < span:
+    frames = curves.window_indices(F, T, frame_step, max_windows=max_windows)
+    if len(frames) == 0:
         raise AnalysisError(f"{source or 'motion'}: {F} frames is shorter than one window "
                             f"({T} samples x step {frame_step} = {span} frames)")
-    count = (F - span) // (T * frame_step) + 1
-    if max_windows is not None:
-        count = min(count, int(max_windows))
-    starts = np.arange(count) * T * frame_step
-    frames = starts[:, None] + frame_step * np.arange(T)[None, :]
+    starts, count = frames[:, 0], len(frames)
     path_frames = starts[:, None] + np.arange(span)[None, :]
     xz = _clean_curves(root[path_frames][..., [0, 2]], np.full(count, span, np.int32), T=int(T),
                        interval=int(interval))
-    curve = jnp.stack([xz[..., 0], jnp.zeros_like(xz[..., 0]), xz[..., 1]], axis=-1)
+    curve = curves.on_floor(xz)
     return MotionWindows(jnp.asarray(root[frames]), jnp.asarray(pose[frames]), curve.astype(jnp.float32),
                          starts, int(frame_step), source)
 
@@ -687,7 +662,7 @@ def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence
     chex.assert_shape([center, scale], (D,))
     # numpy in: one jit cache entry whatever device computation made the inputs
     host = lambda x: np.asarray(x, np.float32)  # noqa: E731
-    w, final, hist = _search_scan(_g_only(state), host(curves.velocity(target.curve_NxTx3)),
+    w, final, hist = _search_scan(step_lib.generator_state(state), host(curves.velocity(target.curve_NxTx3)),
                                   host(curves.velocity(target.root_NxTx3)), host(target.pose_NxTxR),
                                   host((w0 - center) / scale), host(center), host(scale), host(lr),
                                   host(vel_weight), host(length_unit), steps=int(steps),
@@ -751,25 +726,23 @@ def reconstruct(state, target: MotionWindows, w_D):
     N = target.curve_NxTx3.shape[0]
     # numpy in: the same jit cache entry whether w comes from numpy or from a device computation
     w = np.broadcast_to(np.asarray(w_D, np.float32), (N, np.shape(w_D)[-1]))
-    return apply_code(state, curves.velocity(target.curve_NxTx3), w)
+    return generate.apply_code(state, curves.velocity(target.curve_NxTx3), w)
 
 
 def generate_along(state, layout: RowLayout, w_D, curve_xz_Px2, *, spacing_m: float,
                    start_height_m: float) -> dict:
     """Walk with code w along a floor curve: the curve is resampled every `spacing_m` metres (the
-    speed, e.g. the searched clip's `spacing_m`), cut to a multiple of 8 samples, and run through
-    G in one pass; the root is integrated from the curve's start at `start_height_m` (G predicts
-    velocities only). Returns numpy arrays: positions_TxJx3, root_Tx3, pose_TxR, curve_Tx3."""
+    speed, e.g. the searched clip's `spacing_m`) and walked whole by `generate.generate_motion`
+    (padded for G, in chunks when long, a gait phase from offset 0); the root starts at the
+    curve's start at `start_height_m` (G predicts velocities only) in place of generate's floor
+    shift. Returns numpy arrays: positions_TxJx3, root_Tx3, pose_TxR, curve_Tx3."""
     xz = curves.resample_polyline(curve_xz_Px2, spacing=float(spacing_m))
-    T = len(xz) - len(xz) % 8
-    if T < 16:
-        raise AnalysisError(f"the curve gives {len(xz)} samples at {spacing_m:.3g} m per sample; G "
-                            f"needs at least 16 (draw a longer curve)")
-    xz = xz[:T]
-    curve = np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], axis=-1).astype(np.float32)
-    root_vel, pose = apply_code(state, curves.velocity(jnp.asarray(curve)[None]), np.reshape(w_D, (1, -1)))
-    start = jnp.asarray([[curve[0, 0], start_height_m, curve[0, 2]]], jnp.float32)
-    root = curves.integrate(start, root_vel)[0]
-    positions = from_rows(root, pose[0], layout)
-    return {"positions_TxJx3": np.asarray(positions), "root_Tx3": np.asarray(root),
-            "pose_TxR": np.asarray(pose[0]), "curve_Tx3": curve}
+    if len(xz) < 2:
+        raise AnalysisError(f"the curve gives {len(xz)} sample at {spacing_m:.3g} m per sample; a walk "
+                            f"needs at least 2 (draw a longer curve)")
+    curve = curves.on_floor(xz).astype(np.float32)
+    gen = generate.generate_motion(state, layout, curve, np.reshape(np.asarray(w_D, np.float32), (1, -1)))
+    positions = gen.positions[0].copy()
+    positions[..., 1] += float(start_height_m) - gen.floor_shift_m[0]
+    return {"positions_TxJx3": positions, "root_Tx3": positions[:, 0].copy(), "pose_TxR": gen.pose[0],
+            "curve_Tx3": curve}

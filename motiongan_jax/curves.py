@@ -3,8 +3,8 @@
 Units are metres, Y up, floor = X-Z plane; every 2-D curve here is (x, z).
 
 Training hot path (pure jnp, jit-able, batched): `window_curves`. Whole clips and user curves
-(numpy around the same spline core): `floor_path`, `spline_curve`, `resample_polyline`,
-`load_curve_file`, `curve_from_root_positions`, `shape_curve`, `check_curve`.
+(numpy around the same spline core): `floor_path` (and back: `on_floor`), `spline_curve`,
+`resample_polyline`, `load_curve_file`, `curve_from_root_positions`, `shape_curve`, `check_curve`.
 Network-side helpers (CONTRACTS.md): `velocity`, `integrate`, and `rotate_y` for augmentation.
 
 Spline (docs/DESIGN.md §2.3, with the reference's bugs fixed):
@@ -159,6 +159,19 @@ def _grid_frames(N: int, length_B, dtype) -> jax.Array:
     return jnp.minimum(g[None, :], last[:, None])
 
 
+def window_indices(num_frames: int, T: int, frame_step: int = 1, stride: int | None = None,
+                   max_windows: int | None = None) -> np.ndarray:
+    """Frame indices (N, T) of the windows of a clip of `num_frames` frames: T samples `frame_step`
+    frames apart, one starting every `stride` frames from frame 0 (default T·frame_step: back to
+    back), every one that fits (N = 0 when none does), at most `max_windows`. The evaluation's and
+    analysis's windows; training draws its own (data.make_sample_batch)."""
+    span = (T - 1) * frame_step + 1
+    starts = np.arange(0, max(int(num_frames) - span + 1, 0), T * frame_step if stride is None else stride)
+    if max_windows is not None:
+        starts = starts[: int(max_windows)]
+    return starts[:, None] + frame_step * np.arange(T)[None, :]
+
+
 def window_curves(path_xz_BxNx2, length_B, T: int, interval: int, noise=0.0, key=None):
     """Input curves of a batch of windows: T points of equal arc length along each window's spline.
 
@@ -285,6 +298,17 @@ def heading(v_BxTx3):
     return jnp.arctan2(v[..., 0], v[..., -1])
 
 
+def window_frame(root_vel_BxTx3, pose_BxTxR):
+    """Root velocity and pose rows turned about +y so that each window's travel, the sum of its
+    root velocities after the first (v[0] duplicates v[1], `velocity`), points along +z: D's input
+    frame (model.d_frame "window") and the evaluator's canonical frame. A window that does not
+    move keeps its orientation (heading 0)."""
+    theta_B = heading(jnp.sum(root_vel_BxTx3[:, 1:], axis=1))
+    b, t, r = pose_BxTxR.shape
+    pose = rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), -theta_B).reshape(b, t, r)
+    return rotate_y(root_vel_BxTx3, -theta_B), pose
+
+
 # Binomial smoothing of the walking direction: the training curves carry 2% spatial jitter, i.e.
 # about 2 degrees of heading noise per sample, which a body turned by the raw heading would shake with.
 HEADING_TAPS = (1.0, 4.0, 6.0, 4.0, 1.0)
@@ -312,6 +336,13 @@ def smooth_heading(v_BxTx3, taps=HEADING_TAPS):
 def floor_path(root_Fx3):
     """(x, z) of root positions (F, 3) -> (F, 2); works on numpy and jnp alike."""
     return root_Fx3[..., 0::2]
+
+
+def on_floor(xz_x2):
+    """Floor points (..., 2) as (x, 0, z) (..., 3), the inverse of `floor_path`; numpy stays
+    numpy (its dtype kept), anything else becomes jnp."""
+    xp = np if isinstance(xz_x2, np.ndarray) else jnp
+    return xp.stack([xz_x2[..., 0], xp.zeros_like(xz_x2[..., 0]), xz_x2[..., 1]], axis=-1)
 
 
 def check_curve(points, what: str = "curve") -> np.ndarray:
@@ -415,12 +446,13 @@ def resample_polyline(points_Px2, num_points: int | None = None, spacing: float 
     return np.asarray(_eval_spline_jit(spline, x[None], interval=interval)[0], dtype=np.float64)
 
 
-def curve_from_bvh(path, units_to_m: float | None = None) -> np.ndarray:
-    """The floor path (metres) of a BVH file's root (the representation root: the pelvis).
-    Units default to a guess from the skeleton's leg length (CMU units, cm, inches or m)."""
+def curve_from_bvh(path_or_motion, units_to_m: float | None = None) -> np.ndarray:
+    """The floor path (metres) of a BVH file's root (the representation root: the pelvis), from
+    its path or an already read `bvh.Motion`. Units default to a guess from the skeleton's leg
+    length (CMU units, cm, inches or m)."""
     from motiongan_jax import bvh, kinematics, representation
 
-    motion = bvh.read_bvh(path)
+    motion = path_or_motion if isinstance(path_or_motion, bvh.Motion) else bvh.read_bvh(path_or_motion)
     units = representation.guess_units_to_m(motion.skeleton) if units_to_m is None else units_to_m
     root = representation.representation_root(motion.skeleton)
     return curve_from_root_positions(kinematics.world_positions(motion)[:, root] * units)

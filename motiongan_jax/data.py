@@ -138,6 +138,8 @@ def write_file_lists(out_dir: str | Path, train, val, root: str | Path | None = 
 # ----------------------------------------------------------------------------------------------
 
 def cache_root() -> Path:
+    """Where preprocessed clips and the generated embedded dataset live: $MOTIONGAN_CACHE,
+    default ~/.cache/motiongan_jax."""
     return Path(os.environ.get("MOTIONGAN_CACHE", Path.home() / ".cache" / "motiongan_jax"))
 
 
@@ -460,7 +462,7 @@ def make_sample_batch(cfg: DataConfig, batch_size: int):
         path_xz = arrays.root_Nx3[path_frames][..., jnp.array([0, 2])]
         curve_xz = curves.window_curves(path_xz, length_B, T, cfg.control_point_interval,
                                         cfg.curve_noise, k_curve)
-        curve = jnp.stack([curve_xz[..., 0], jnp.zeros_like(curve_xz[..., 0]), curve_xz[..., 1]], -1)
+        curve = curves.on_floor(curve_xz)
         if cfg.rotate:
             theta_B = jax.random.uniform(k_rot, (batch_size,), maxval=2 * jnp.pi)
             root = curves.rotate_y(root, theta_B[:, None])

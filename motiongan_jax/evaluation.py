@@ -200,7 +200,7 @@ def gait_traces(state, cfg, layout, val_clips, style_names, feet, sample_rate: f
                                         interval=cfg.data.control_point_interval, max_windows=1)
         curve = np.asarray(mw.curve_NxTx3[0], np.float32)
         z = jax.random.normal(jax.random.fold_in(jax.random.key(seed), c), (1, step_lib.generator_z_dim(state)))
-        gen = generate.generate_motion(state, layout, curve, np.asarray(analysis.latent_codes(state, np.array([c]), z)))
+        gen = generate.generate_motion(state, layout, curve, np.asarray(generate.latent_codes(state, np.array([c]), z)))
         real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
                                     layout), np.float64)
         out.append(GaitTrace(name, clip.source, metrics.toe_heights(real[:, list(feet)]),
@@ -237,11 +237,11 @@ def motion_metrics(joints_LxJx3, curve_Lx3, layout, feet, fps: float, contact_he
 
 
 def cut_windows(root_BxLx3, pose_BxLxR, T: int):
+    """Back-to-back windows of T samples of every motion: (root (B·n) x T x 3, pose, n)."""
     B, L, _ = root_BxLx3.shape
-    n = L // T
-    r = root_BxLx3[:, : n * T].reshape(B * n, T, 3)
-    p = pose_BxLxR[:, : n * T].reshape(B * n, T, -1)
-    return r, p, n
+    frames = curves.window_indices(L, T)
+    n = len(frames)
+    return root_BxLx3[:, frames].reshape(B * n, T, 3), pose_BxLxR[:, frames].reshape(B * n, T, -1), n
 
 
 # ---------------------------------------------------------------------------------------------
@@ -316,7 +316,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
     rows, win_logits, win_feats, win_labels, mm_groups = [], [], [], [], []
     for ci, c in enumerate(ctx.curves_):
         z = jax.random.normal(jax.random.fold_in(key, ci), (C * s.k, Z), jnp.float32)
-        w = analysis.latent_codes(ctx.state, labels, z)
+        w = generate.latent_codes(ctx.state, labels, z)
         # each draw starts its walk at its own gait phase, as in training
         phase = (np.asarray(jax.random.uniform(jax.random.fold_in(key, 100_000 + ci), (C * s.k,), maxval=2 * np.pi))
                  if step_lib.has_gait_phase(ctx.state) else None)
@@ -341,7 +341,7 @@ def _long_curve_block(ctx: Context, seed: int) -> dict:
     """Every style (one noise draw) along the long curve: gait metrics, averaged over styles."""
     C = len(ctx.style_names)
     z = jax.random.normal(jax.random.key(20_000 + seed), (C, step_lib.generator_z_dim(ctx.state)), jnp.float32)
-    w = analysis.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z)
+    w = generate.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z)
     gen = generate.generate_motion(ctx.state, ctx.layout, ctx.long_curve.curve_Lx3, np.asarray(w))
     rows = [gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m) for b in range(C)]
     return {f"long_{k}": _mean_key(rows, k) for k in GAIT_KEYS}
@@ -396,12 +396,12 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
     T = ctx.cfg.data.window_T
     key = jax.random.key(10_000 + seed)
     k_a, k_b = jax.random.split(key)
-    fit = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_a)
-    test = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_b)
+    fit = analysis.label_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_a)
+    test = analysis.label_codes(ctx.state, ctx.style_names, k=s.w_samples, key=k_b)
     X, y = test.flat_samples
     cents = np.asarray(fit.centroids_CxD)
     nc_acc = metrics.nearest_centroid_accuracy(np.asarray(X), np.asarray(y), cents)
-    ev_ratio = metrics.explained_variance(np.asarray(fit.flat_samples[0]))
+    ev_ratio = np.asarray(analysis.pca(fit.flat_samples[0]).explained_variance_ratio_K)
     # a straight line of L samples at the held-out median spacing, for interpolation/arithmetic
     line = next((c for c in ctx.curves_ if c.name == "line"), ctx.curves_[0]).curve_Lx3
     # the first component alone shows a style code collapsed onto one line (docs/RESULTS.md §8)
@@ -440,7 +440,7 @@ def _search_block(ctx: Context) -> dict:
     if s.search_clips < 1:
         return {}
     T, step = ctx.cfg.data.window_T, ctx.cfg.data.frame_step
-    codes = analysis.style_codes(ctx.state, ctx.style_names, k=s.w_samples)
+    codes = analysis.label_codes(ctx.state, ctx.style_names, k=s.w_samples)
     taken: dict[str, int] = {}
     hits, losses = [], []
     for clip in ctx.val_clips:
@@ -708,6 +708,7 @@ def plot_confusion(conf_gen, conf_real, style_names, path) -> Path:
 
 
 def to_jsonable(x):
+    """Numpy values -> Python, non-finite floats -> None (strict JSON)."""
     if isinstance(x, dict):
         return {str(k): to_jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -718,6 +719,8 @@ def to_jsonable(x):
         return float(x) if math.isfinite(float(x)) else None
     if isinstance(x, np.integer):
         return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
     return x
 
 

@@ -54,17 +54,10 @@ class EvaluatorConfig:
 # ---------------------------------------------------------------------------------------------
 
 
-def heading_angle(root_NxTx3: jax.Array) -> jax.Array:
-    """Angle about +y (radians) of each window's floor chord, root[T-1] - root[0]; 0 = +z."""
-    return curves.heading(root_NxTx3[:, -1] - root_NxTx3[:, 0])
-
-
-def canonical_pose(root_NxTxR3: jax.Array, pose_NxTxR: jax.Array) -> jax.Array:
-    """Root-relative rows rotated about +y by minus the heading, so every window walks along +z.
-    (A window that does not move keeps an arbitrary but deterministic orientation.)"""
-    n, t, r = pose_NxTxR.shape
-    p = curves.rotate_y(jnp.asarray(pose_NxTxR).reshape(n, t, r // 3, 3), -heading_angle(root_NxTxR3))
-    return p.reshape(n, t, r)
+def canonical_pose(root_NxTx3: jax.Array, pose_NxTxR: jax.Array) -> jax.Array:
+    """Root-relative rows turned about +y so that every window walks along +z: D's window frame
+    (`curves.window_frame`) of the root's velocity."""
+    return curves.window_frame(curves.velocity(root_NxTx3), jnp.asarray(pose_NxTxR))[1]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -289,12 +282,7 @@ def load(path: str | Path) -> Evaluator:
 
 def clip_windows(root_Fx3, pose_FxR, T: int, frame_step: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
     """Every window of T samples `frame_step` frames apart, starting every `stride` frames."""
-    span = (T - 1) * frame_step + 1
-    F = len(root_Fx3)
-    if F < span:
-        return np.zeros((0, T, 3), np.float32), np.zeros((0, T, pose_FxR.shape[1]), np.float32)
-    starts = np.arange(0, F - span + 1, stride)
-    frames = starts[:, None] + frame_step * np.arange(T)[None]
+    frames = curves.window_indices(len(root_Fx3), T, frame_step, stride)
     return np.asarray(root_Fx3, np.float32)[frames], np.asarray(pose_FxR, np.float32)[frames]
 
 

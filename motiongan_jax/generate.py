@@ -3,7 +3,7 @@
 The pieces bin/generate.py strings together (each usable on its own):
 
     parse_style(text, style_names, seed)  -> StyleSpec     a label, mix, expression, w file, random
-    style_codes(state, specs, names, z)   -> w (N, w_dim)  in w space, z = 0 by default
+    spec_codes(state, specs, names, z)    -> w (N, w_dim)  in w space, z = 0 by default
     load_curve(text, length, scale)       -> Curve         a shape, a CSV/JSON file or a BVH root path
     prepare_curve(curve, sample_rate, speed) -> (M, 3)     equal spacing, every sample of the curve
     generate_motion(state, layout, curve, w) -> Generated  G (in chunks if long), integration, floor
@@ -120,6 +120,22 @@ INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 _apply_g = jax.jit(lambda state, vel, w, phase: step_lib.generator_apply(state, vel, w_BxD=w, phase_offset_B=phase))
 _latent_w = jax.jit(step_lib.latent_w)
 _stride_m = jax.jit(lambda state, w: jnp.exp(step_lib.generator(state).log_stride(w)))  # λ(w), metres
+
+
+def apply_code(state, curve_vel_BxTx3, w_BxW, phase_offset_B=None):
+    """(root_vel_BxTx3, pose_BxTxR) of G for style codes w: the one jitted G of generation,
+    analysis and evaluation (compiled once per shape, on G's part of the state; inputs go through
+    numpy so that arrays from any computation share one cache entry). `phase_offset_B`: a G with
+    a gait phase starts there (radians; None: 0)."""
+    phase = None if phase_offset_B is None else np.asarray(phase_offset_B, np.float32)
+    return _apply_g(step_lib.generator_state(state), np.asarray(curve_vel_BxTx3, np.float32),
+                    np.asarray(w_BxW, np.float32), phase)
+
+
+def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
+    """w = LT(label, z) for each row (B x w_dim; jitted on G's part of the state)."""
+    return _latent_w(step_lib.generator_state(state), jnp.asarray(labels_B, jnp.int32),
+                     jnp.asarray(z_BxZ, jnp.float32))
 
 
 class GenerateError(ValueError):
@@ -325,8 +341,8 @@ def z_codes(state, z: str | int = "zero", seed: int = 0) -> np.ndarray:
     return np.asarray(jax.random.normal(key, (k, z_dim), jnp.float32))
 
 
-def style_codes(state, specs: Sequence[StyleSpec], style_names: Sequence[str],
-                z_KxZ: np.ndarray | None = None) -> np.ndarray:
+def spec_codes(state, specs: Sequence[StyleSpec], style_names: Sequence[str],
+               z_KxZ: np.ndarray | None = None) -> np.ndarray:
     """w (len(specs) * K, w_dim) float32: for each spec, for each of the K z codes (default one
     zero z). Every label's w is computed in one fixed batch (all labels x all z), so a style's
     w does not depend on the other specs; sums are taken in float64, so weights 1 and 0 give
@@ -337,8 +353,7 @@ def style_codes(state, specs: Sequence[StyleSpec], style_names: Sequence[str],
         raise GenerateError(f"z must be (K, {z_dim}), got shape {z.shape}")
     K = len(z)
     labels = np.repeat(np.arange(C, dtype=np.int32), K)
-    w_all = np.asarray(_latent_w(state, jnp.asarray(labels), jnp.asarray(np.tile(z, (C, 1)))),
-                       np.float64).reshape(C, K, D)
+    w_all = np.asarray(latent_codes(state, labels, np.tile(z, (C, 1))), np.float64).reshape(C, K, D)
     index = {n: i for i, n in enumerate(style_names)}
     out = []
     for s in specs:
@@ -401,13 +416,11 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
         raise GenerateError(f"curve file {path}: {size / 2**20:.0f} MiB is larger than the limit of "
                             f"{MAX_CURVE_FILE_BYTES / 2**20:.0f} MiB (generate.MAX_CURVE_FILE_BYTES)")
     if path.suffix.lower() == ".bvh":
-        from motiongan_jax import bvh, kinematics, representation
+        from motiongan_jax import bvh
 
         motion = bvh.read_bvh(path)
         _check_points(motion.num_frames, f"curve {path.name}")
-        units = representation.guess_units_to_m(motion.skeleton)
-        root = representation.representation_root(motion.skeleton)
-        pts = curves.curve_from_root_positions(kinematics.world_positions(motion)[:, root] * units)
+        pts = curves.curve_from_bvh(motion)
         check_curve_limits(pts, f"curve {path.name}")
         frames = len(pts)
         seconds = (frames - 1) * motion.frame_time
@@ -489,7 +502,7 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
         note += f"; in overlapping chunks of {CHUNK_T} samples"
     if log is not None:
         log(note)
-    return np.stack([xz[:, 0], np.zeros(M), xz[:, 1]], -1).astype(np.float32)
+    return curves.on_floor(xz).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -624,7 +637,7 @@ def _g_outputs(state, vel_Tx3, w_BxD: np.ndarray, phase_B: np.ndarray | None, ch
         # the first velocity is not walked): a chunk starting at s starts at the phase walked by s
         step_T = np.linalg.norm(np.asarray(vel_Tx3, np.float64)[:, ::2], axis=-1)
         walked_T = np.cumsum(np.concatenate([[0.0], step_T[1:]]))
-        stride_B = np.asarray(_stride_m(state, jnp.asarray(w_BxD)), np.float64)
+        stride_B = np.asarray(_stride_m(step_lib.generator_state(state), jnp.asarray(w_BxD)), np.float64)
     total, done = -(-B // group) * len(starts), 0
     root = pose = None
     norm_T = np.zeros(T)
@@ -640,7 +653,7 @@ def _g_outputs(state, vel_Tx3, w_BxD: np.ndarray, phase_B: np.ndarray | None, ch
                 phase = phase_B[idx] if s == 0 else np.mod(phase_B[idx] + 2 * np.pi * walked_T[s] / stride_B[idx],
                                                             2 * np.pi)
                 phase = jnp.asarray(phase, jnp.float32)
-            r, p = _apply_g(state, jnp.broadcast_to(vel_Tx3[s:s + L], (group, L, 3)), wg, phase)
+            r, p = apply_code(state, jnp.broadcast_to(vel_Tx3[s:s + L], (group, L, 3)), wg, phase)
             r = np.asarray(r, np.float64)[:keep]
             p = np.asarray(p, np.float64)[:keep]
             if root is None:

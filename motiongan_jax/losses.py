@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from motiongan_jax import curves
+from motiongan_jax import curves, representation
 
 GAN_LOSSES = ("bce_prob", "bce_logit")
 REAL_TARGET = 0.9  # label smoothing of the reference
@@ -99,24 +99,10 @@ def curve_loss(root_vel_BxTx3: jax.Array, curve_BxTx3: jax.Array, points: int = 
     return jnp.sum(0.5 * jnp.sum(mse_xz, axis=-1))
 
 
-def bone_lengths(pose_BxTxR: jax.Array, bone_pairs: Sequence[tuple[int, int]]) -> jax.Array:
-    """Lengths B x T x len(bone_pairs). Kept-joint index 0 is the root at the origin; joint k >= 1
-    is pose rows 3(k-1) .. 3(k-1)+2."""
-    b, t, r = pose_BxTxR.shape
-    pos = jnp.concatenate([jnp.zeros((b, t, 1, 3), pose_BxTxR.dtype), pose_BxTxR.reshape(b, t, r // 3, 3)], axis=2)
-    pairs = np.asarray(bone_pairs, dtype=np.int32).reshape(-1, 2)
-    diff = pos[:, :, pairs[:, 0]] - pos[:, :, pairs[:, 1]]
-    # sqrt has an infinite gradient at 0; a zero-length generated bone is a degenerate case we
-    # guard so it cannot emit NaN (the reference would).
-    sq = jnp.sum(jnp.square(diff), axis=-1)
-    safe = jnp.where(sq > 0, sq, 1.0)
-    return jnp.where(sq > 0, jnp.sqrt(safe), 0.0)
-
-
 def bone_loss(pose_BxTxR: jax.Array, bone_pairs: Sequence[tuple[int, int]], target_lengths,
               unit: float = 1.0) -> jax.Array:
     """MSE (over B x T x bones) between generated and target bone lengths, in `unit`s."""
-    lengths = bone_lengths(pose_BxTxR, bone_pairs)
+    lengths = representation.bone_lengths(pose_BxTxR, bone_pairs)
     target = jnp.asarray(target_lengths, lengths.dtype)
     return jnp.mean(jnp.square((lengths - target) / unit))
 

@@ -22,6 +22,8 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
+from motiongan_jax import representation
+
 # Reference foot-skate threshold (docs/DESIGN.md §5.4): 0.5 CMU units per 15 Hz sample, in metres.
 CMU_UNIT_M = 0.056444
 FOOT_SKATE_THRESHOLD_M = 0.5 * CMU_UNIT_M
@@ -337,7 +339,7 @@ def bone_length_error(joints_TxJx3, bone_pairs_Bx2, target_lengths_B) -> float:
     targets = _float_array(target_lengths_B, "target_lengths_B", 1, shape=(pairs.shape[0],))
     if np.any(targets <= 0):
         raise ValueError("target_lengths_B: lengths must be > 0")
-    lengths_TxB = np.linalg.norm(joints[:, pairs[:, 1]] - joints[:, pairs[:, 0]], axis=-1)
+    lengths_TxB = representation.joint_bone_lengths(joints, pairs)
     return float(np.mean(np.abs(lengths_TxB - targets) / targets))
 
 
@@ -506,18 +508,6 @@ def nearest_centroid_accuracy(w_NxD, labels_N, centroids_CxD) -> float:
     if labels.shape[0] != pred.shape[0]:
         raise ValueError(f"labels_N: length {labels.shape[0]} does not match w_NxD ({pred.shape[0]})")
     return float(np.mean(pred == labels))
-
-
-def explained_variance(X_NxD) -> np.ndarray:
-    """Explained-variance ratios (float64, (min(N, D),), descending, summing to 1) of the
-    principal components of X, from the singular values of the centred data. Needs N ≥ 2 and
-    some variance."""
-    X = _float_array(X_NxD, "X_NxD", 2, min_len=2)
-    s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
-    total = np.sum(s**2)
-    if total <= 0.0:
-        raise ValueError("X_NxD: all rows are identical (zero variance)")
-    return s**2 / total
 
 
 # ---------------------------------------------------------------------------------------------

@@ -161,20 +161,36 @@ def from_rows(root_Fx3, pose_FxR, layout: RowLayout):
 
 
 def _concat(a, b):
-    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
-        return np.concatenate([a, b], axis=-2)
+    xp = np if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) else _xp(None)
+    return xp.concatenate([a, b], axis=-2)
+
+
+def _xp(x):
+    if isinstance(x, np.ndarray):
+        return np
     import jax.numpy as jnp
 
-    return jnp.concatenate([a, b], axis=-2)
+    return jnp
 
 
-def bone_lengths(pose_xR, layout: RowLayout) -> np.ndarray:
-    """Bone lengths of root-relative rows (root at the origin), shape (..., J - 1). numpy."""
-    rel = pose_xR.reshape(pose_xR.shape[:-1] + (layout.num_rel_joints, 3))
-    full = np.concatenate([np.zeros_like(rel[..., :1, :]), rel], axis=-2)
-    a = np.array([p for p, _ in layout.bone_pairs])
-    b = np.array([c for _, c in layout.bone_pairs])
-    return np.linalg.norm(full[..., b, :] - full[..., a, :], axis=-1)
+def joint_bone_lengths(joints_xJx3, bone_pairs):
+    """Lengths (..., len(bone_pairs)) of the (parent, child) joint pairs of positions (..., J, 3):
+    numpy in, numpy out; jnp (traced included) in, jnp out. A zero-length bone is 0 with a finite
+    gradient (sqrt's gradient at 0 is infinite, and a generated bone can collapse)."""
+    xp = _xp(joints_xJx3)
+    pairs = np.asarray(bone_pairs, dtype=np.int32).reshape(-1, 2)
+    diff = joints_xJx3[..., pairs[:, 0], :] - joints_xJx3[..., pairs[:, 1], :]
+    sq = xp.sum(xp.square(diff), axis=-1)
+    return xp.where(sq > 0, xp.sqrt(xp.where(sq > 0, sq, 1.0)), 0.0)
+
+
+def bone_lengths(pose_xR, bone_pairs):
+    """Bone lengths (..., len(bone_pairs)) of root-relative rows (..., R) (kept joint 0 is the root
+    at the origin, joint k >= 1 is rows 3(k-1) .. 3(k-1)+2); `bone_pairs` as layout.bone_pairs.
+    numpy or jnp, as `joint_bone_lengths`."""
+    xp = _xp(pose_xR)
+    rel = pose_xR.reshape(pose_xR.shape[:-1] + (pose_xR.shape[-1] // 3, 3))
+    return joint_bone_lengths(xp.concatenate([xp.zeros_like(rel[..., :1, :]), rel], axis=-2), bone_pairs)
 
 
 # Skeleton semantics: which joints are the feet and the hips

@@ -172,6 +172,12 @@ def discriminator(state: TrainState) -> Discriminator:
     return nnx.merge(state.d_def, state.d_params, state.d_sn_state, copy=True)
 
 
+def generator_state(state: TrainState) -> TrainState:
+    """The state with only what G needs (its `g_params`), so that jitted inference neither copies
+    nor keys on D, the optimisers or the moving average."""
+    return state.replace(d_params=None, d_sn_state=None, opt_g_state=None, opt_d_state=None, g_ema_params=None)
+
+
 def _zeros_z(state: TrainState, batch: int) -> jax.Array:
     return jnp.zeros((batch, generator_z_dim(state)), jnp.float32)
 

@@ -610,10 +610,6 @@ def _put_on_floor(motion: Motion, fps: float) -> Motion:
 # ----------------------------------------------------------------------------------------------
 
 
-def _cache_root() -> Path:
-    return Path(os.environ.get("MOTIONGAN_CACHE", Path.home() / ".cache" / "motiongan_jax"))
-
-
 def dataset_manifest(*, seed: int, clips_per_style: int, seconds: float, fps: float,
                      styles: Sequence[str]) -> dict:
     return {
@@ -686,7 +682,9 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
 def default_dataset_dir(seed: int = 0) -> Path:
     """$MOTIONGAN_CACHE (default ~/.cache/motiongan_jax)/synthetic-v{VERSION}-seed{seed}, generated
     with the default settings if missing. Safe when processes race: the loser uses the winner's."""
-    out = _cache_root() / f"synthetic-v{VERSION}-seed{int(seed)}"
+    from motiongan_jax.data import cache_root  # not at the top: data imports this module
+
+    out = cache_root() / f"synthetic-v{VERSION}-seed{int(seed)}"
     if (out / "styles.json").is_file():
         return out
     if out.exists():

@@ -108,7 +108,7 @@ def preview_curve(T: int, spacing_m: float) -> np.ndarray:
     """The fixed preview curve: an S-curve with the training data's mean spacing per sample."""
     pts = curves.shape_curve("s_curve", length=spacing_m * (T - 1), num_points=200)
     xz = curves.resample_polyline(pts, num_points=T)
-    return np.stack([xz[:, 0], np.zeros(T), xz[:, 1]], -1).astype(np.float32)
+    return curves.on_floor(xz).astype(np.float32)
 
 
 def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray, num: int = 3) -> Path:

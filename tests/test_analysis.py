@@ -12,6 +12,7 @@ import pytest
 
 from motiongan_jax import analysis as A
 from motiongan_jax import bvh, checkpoint, curves, kinematics, representation, synthetic
+from motiongan_jax import generate as gen
 
 
 @pytest.fixture(scope="module")
@@ -113,7 +114,7 @@ def test_probe_recovers_a_linear_map_and_not_noise():
 def test_style_codes_and_gait_parameters(run):
     _, state, meta, cfg, _ = run
     names = meta["style_names"]
-    codes = A.style_codes(state, names, k=3, key=jax.random.key(2))
+    codes = A.label_codes(state, names, k=3, key=jax.random.key(2))
     W = cfg.model.w_dim
     chex.assert_shape(codes.zero_CxD, (len(names), W))
     chex.assert_shape(codes.samples_CxKxD, (len(names), 3, W))
@@ -121,7 +122,7 @@ def test_style_codes_and_gait_parameters(run):
     np.testing.assert_allclose(codes.zero_CxD, A.step_lib.generator(state).style(
         labels, jnp.zeros((len(names), cfg.model.z_dim))), rtol=1e-5, atol=1e-9)
     z = jax.random.normal(jax.random.key(5), (len(names), cfg.model.z_dim))
-    w = A.latent_codes(state, labels, z)
+    w = gen.latent_codes(state, labels, z)
     chex.assert_shape(w, (len(names), W))
     np.testing.assert_allclose(w, A.step_lib.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
     assert not np.allclose(w, codes.zero_CxD)  # z reaches w
@@ -143,7 +144,7 @@ def test_w_blend_equals_adain_blend(run):
     vel = np.asarray(curves.velocity(curve))
     # codes far apart (|w| ~ 1, not the ~1e-5 codes of a 4-step model), so that they matter
     ws = jax.random.normal(jax.random.key(1), (3, W))
-    by_w_fn = lambda w: A.apply_code(state, vel, w)  # noqa: E731
+    by_w_fn = lambda w: gen.apply_code(state, vel, w)  # noqa: E731
     adain_fn = jax.jit(A.generator_apply_adain)
     by_adain_fn = lambda adain: adain_fn(state, vel, adain)  # noqa: E731
     outs = [by_w_fn(ws[i:i + 1]) for i in range(3)]
@@ -211,7 +212,7 @@ def test_style_search_recovers_a_known_w(run):
     _, state, meta, cfg, layout = run
     T, N = 64, 1
     curve = jnp.cumsum(jax.random.normal(jax.random.key(3), (N, T, 3)).at[..., 1].set(0), axis=1)
-    codes = A.style_codes(state, meta["style_names"], k=3)
+    codes = A.label_codes(state, meta["style_names"], k=3)
     direction = jax.random.normal(jax.random.key(5), (cfg.model.w_dim,))
     w_true = codes.centroids_CxD[0] + 0.3 * direction / jnp.linalg.norm(direction)
     probe = A.MotionWindows(curve, jnp.zeros((N, T, layout.num_rows)), curve, np.zeros(N, int), 1)

@@ -60,7 +60,7 @@ def _direct(engine, points, styles, z="zero", seed=0):
     """What bin/generate.py's steps give for the same request, without the demo."""
     curve = gen.prepare_curve(gen.Curve(np.asarray(points, float), "path"), RATE, SPEED)
     specs = [gen.parse_style(s, engine.style_names, seed) for s in styles]
-    w = gen.style_codes(engine.state, specs, engine.style_names, gen.z_codes(engine.state, z, seed))
+    w = gen.spec_codes(engine.state, specs, engine.style_names, gen.z_codes(engine.state, z, seed))
     return gen.generate_motion(engine.state, engine.layout, curve, w), specs
 
 

@@ -103,7 +103,7 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
     specs = [gen.parse_style(s, names) for s in
              ("Sad", "Happy", "Sad:1,Happy:0", "Sad:0,Happy:1", "Sad:0.5,Happy:0.5",
               "OldMan - Normal + Marching", "OldMan", "Normal", "Marching")]
-    w = gen.style_codes(state, specs, names)
+    w = gen.spec_codes(state, specs, names)
     chex.assert_shape(w, (len(specs), gen.w_dim(state)))
     np.testing.assert_array_equal(w[2], w[0])  # α = 0: style A's w exactly
     np.testing.assert_array_equal(w[3], w[1])
@@ -114,17 +114,17 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
     np.testing.assert_allclose(w[0], direct, rtol=1e-6, atol=1e-12)
     # a raw w file, and one of the wrong size (incompatible with this checkpoint)
     np.save(tmp_path / "w.npy", w[1])
-    np.testing.assert_array_equal(gen.style_codes(state, [gen.parse_style(str(tmp_path / "w.npy"), names)], names)[0], w[1])
+    np.testing.assert_array_equal(gen.spec_codes(state, [gen.parse_style(str(tmp_path / "w.npy"), names)], names)[0], w[1])
     np.savetxt(tmp_path / "bad.txt", np.zeros(gen.w_dim(state) + 3))
     with pytest.raises(gen.StyleError, match=f"has {gen.w_dim(state) + 3} values.*w has {gen.w_dim(state)}"):
-        gen.style_codes(state, [gen.parse_style(str(tmp_path / "bad.txt"), names)], names)
+        gen.spec_codes(state, [gen.parse_style(str(tmp_path / "bad.txt"), names)], names)
     # z modes
     z_dim = step_lib.generator_z_dim(state)
     chex.assert_shape(gen.z_codes(state, "zero"), (1, z_dim))
     assert not np.any(gen.z_codes(state, "zero"))
     np.testing.assert_array_equal(gen.z_codes(state, "seed", 3), gen.z_codes(state, "seed", 3))
     chex.assert_shape(gen.z_codes(state, "3", 0), (3, z_dim))
-    chex.assert_shape(gen.style_codes(state, specs[:2], names, gen.z_codes(state, 3)), (6, gen.w_dim(state)))
+    chex.assert_shape(gen.spec_codes(state, specs[:2], names, gen.z_codes(state, 3)), (6, gen.w_dim(state)))
     with pytest.raises(gen.GenerateError, match="--z must be"):
         gen.z_codes(state, "lots")
 
@@ -215,7 +215,7 @@ def test_a_curve_six_windows_long_walks_on_the_floor(run):
     state, meta, cfg, layout = run
     assert cfg.data.window_T == 16 and gen.sample_rate(meta, cfg) == 15.0
     curve = gen.prepare_curve(_line(), gen.sample_rate(meta, cfg), SPEED)
-    w = gen.style_codes(state, [gen.parse_style("Happy", meta["style_names"])], meta["style_names"])
+    w = gen.spec_codes(state, [gen.parse_style("Happy", meta["style_names"])], meta["style_names"])
     out = gen.generate_motion(state, layout, curve, w)
     J = layout.num_joints
     chex.assert_shape(out.positions, (1, T_LONG, J, 3))
@@ -254,7 +254,7 @@ def test_the_whole_curve_is_walked_and_the_motion_cropped_to_it(run):
     would normalise rounding noise)."""
     state, meta, cfg, layout = run
     full = _arc_then_straight(T_LONG, 80)
-    w = gen.style_codes(state, [gen.parse_style("Sad", meta["style_names"])], meta["style_names"])
+    w = gen.spec_codes(state, [gen.parse_style("Sad", meta["style_names"])], meta["style_names"])
     ref = gen.generate_motion(state, layout, full, w)
     out = gen.generate_motion(state, layout, full[:90], w)
     chex.assert_shape(out.positions, (1, 90, layout.num_joints, 3))
@@ -316,7 +316,7 @@ def gait_model(repo):
     from motiongan_jax.nn.generator import STRIDE_GAIN
 
     g = step_lib.generator(state)
-    w = gen.style_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
+    w = gen.spec_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     g.stride_head.kernel[...] = (np.linalg.pinv(w) @ (np.log([0.8, 1.4]) / STRIDE_GAIN))[:, None]
     return state.replace(g_params=nnx.state(g, nnx.Param)), layout
 
@@ -376,7 +376,7 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     monkeypatch.setattr(gen, "_apply_g", _compiled_fast(gen._apply_g))
     real = gen._apply_g
     full = _wandering(1536, straight_from=1500)
-    w = gen.style_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
+    w = gen.spec_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     phi0 = np.array([0.5, 4.0])
     ref = gen.generate_motion(state, layout, full, w, phi0)
     calls, progress = [], []
@@ -510,7 +510,7 @@ def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, ca
     assert m and int(m.group(1)) == fitted.sum(), note
     assert float(m.group(3)) == pytest.approx(np.degrees(angle[:, fitted].max()), rel=0.05, abs=1e-3)
     np.testing.assert_allclose(representation.bone_lengths(
-        (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
+        (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout.bone_pairs), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
         atol=1e-6)
     # the exact form: zero-length branch joints, every bone direction exact; it reads back to the layout too
     assert cli([*common, "--out", str(tmp_path / "exact.bvh"), "--bvh-hierarchy", "exact"]) == 0

@@ -64,7 +64,7 @@ def _walk(state, layout, meta, cfg, style="Happy", T=32):
     rate, names = gen.sample_rate(meta, cfg), list(meta["style_names"])
     line = curves.shape_curve("line", scale=(T - 1) * SPEED / rate + 1e-6)
     curve = gen.prepare_curve(gen.Curve(line, "line"), rate, SPEED)
-    w = gen.style_codes(state, [gen.parse_style(style, names)], names)
+    w = gen.spec_codes(state, [gen.parse_style(style, names)], names)
     return gen.generate_motion(state, layout, curve, w)
 
 

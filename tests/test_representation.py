@@ -49,7 +49,7 @@ def test_rows_roundtrip_and_bone_lengths_from_fk(cmu, bandai):
         back = from_rows(root, pose, layout)
         np.testing.assert_allclose(back, world[:, list(layout.source_index)], atol=1e-9)
         # Rigid bones: FK rows have the skeleton's bone lengths in every frame.
-        lengths = bone_lengths(pose, layout)
+        lengths = bone_lengths(pose, layout.bone_pairs)
         np.testing.assert_allclose(lengths, np.broadcast_to(layout.bone_lengths_m, lengths.shape), atol=1e-6)
 
 

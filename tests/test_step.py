@@ -297,7 +297,7 @@ def test_window_frame_d_gives_the_same_verdict_for_every_rotation():
     """model.d_frame = window: D turns each window's travel to +z first, so rotating a window
     changes neither head (the world-frame D's verdicts do change); same parameters."""
     from motiongan_jax.curves import rotate_y
-    from motiongan_jax.nn.discriminator import window_frame
+    from motiongan_jax.curves import window_frame
 
     cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=4, d_frame="window")))
     world_cfg = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, d_frame="world"))

@@ -2,7 +2,7 @@
 
 No web framework here (server.py is the HTTP side): a request is a plain dict as decoded from
 JSON, checked against the stated limits below, then run through generate.py's public steps
-(parse_style, z_codes, style_codes, prepare_curve, generate_motion, write_outputs), so the page
+(parse_style, z_codes, spec_codes, prepare_curve, generate_motion, write_outputs), so the page
 gets the same styles, messages and files as bin/generate.py.
 
 Latency. G is jit-compiled once per input shape (a few seconds each), so a freshly drawn path of
@@ -231,7 +231,7 @@ class Engine:
             raise RequestError(f"path: {T} samples at {speed:g} m/s ({T / self.rate:.0f} s of walking); "
                                f"the demo walks at most {SAMPLE_BUCKETS[-1]} "
                                f"({SAMPLE_BUCKETS[-1] / self.rate:.0f} s): draw a shorter path or walk faster")
-        w = self._style_codes(specs, z)
+        w = self._spec_codes(specs, z)
         B = len(w)
         Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
         w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
@@ -245,15 +245,15 @@ class Engine:
         zs = np.concatenate([z] * len(specs))
         return Result(cut, titles, zs, tuple(notes), Tb, Bb)
 
-    def _style_codes(self, specs, z) -> np.ndarray:
-        """generate.style_codes, remembered for the last STYLE_CACHE (styles, z): moving the
+    def _spec_codes(self, specs, z) -> np.ndarray:
+        """generate.spec_codes, remembered for the last STYLE_CACHE (styles, z): moving the
         speed or redrawing the path reuses them."""
         key = (tuple((s.kind, s.terms) for s in specs), z.tobytes())
         with self._codes_lock:
             if key in self._codes:
                 self._codes.move_to_end(key)
                 return self._codes[key]
-        w = gen_lib.style_codes(self.state, specs, self.style_names, z)
+        w = gen_lib.spec_codes(self.state, specs, self.style_names, z)
         w.setflags(write=False)  # shared by the requests that hit the cache
         with self._codes_lock:
             self._codes[key] = w

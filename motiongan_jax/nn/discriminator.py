@@ -22,9 +22,9 @@ u, v (the reference calls D three times per training iteration, in train mode).
 
 Window frame (model.d_frame = "window", small configs only; "world" is the paper's D): before
 the first layer, root velocity and pose are turned about +y so that the window's travel (the sum
-of its root velocities) points along +z, the evaluator's canonical frame. D's verdicts are then
-the same for every rotation of a window, so it need not learn each direction the rotation
-augmentation draws. Same parameters.
+of its root velocities) points along +z (`curves.window_frame`, the evaluator's canonical frame
+too). D's verdicts are then the same for every rotation of a window, so it need not learn each
+direction the rotation augmentation draws. Same parameters.
 
 Projection (model.d_cond = "projection", small configs; "none" is the paper's D): the real/fake
 logit gains <V[y], flat>, V a spectral-norm linear map from the flattened features to one row per
@@ -51,15 +51,6 @@ from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, unifor
 PADDED_ROWS = 81
 FRAMES = ("world", "window")
 CONDS = ("none", "projection")
-
-
-def window_frame(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Root velocity and pose turned about +y so that each window's travel, the sum of its root
-    velocities after the first (v[0] duplicates v[1], curves.velocity), points along +z."""
-    theta_B = curves.heading(jnp.sum(root_vel_BxTx3[:, 1:], axis=1))
-    b, t, r = pose_BxTxR.shape
-    pose = curves.rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), -theta_B).reshape(b, t, r)
-    return curves.rotate_y(root_vel_BxTx3, -theta_B), pose
 
 
 def flatten_channel_major(x_BxTx1xC: jax.Array) -> jax.Array:
@@ -135,7 +126,7 @@ class Discriminator(nnx.Module):
         # inputs in metres; the layers work in length_unit, like the generator
         with jax.named_scope("D"):
             if self.frame == "window":
-                root_vel_BxTx3, pose_BxTxR = window_frame(root_vel_BxTx3, pose_BxTxR)
+                root_vel_BxTx3, pose_BxTxR = curves.window_frame(root_vel_BxTx3, pose_BxTxR)
             x = self._input(root_vel_BxTx3 / self.length_unit, pose_BxTxR / self.length_unit)
             x = x.astype(self.compute_dtype)
             x = leaky_relu(self.c0_0(x, update_stats=update_stats))
