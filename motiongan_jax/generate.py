@@ -122,14 +122,14 @@ _latent_w = jax.jit(step_lib.latent_w)
 _stride_m = jax.jit(lambda state, w: jnp.exp(step_lib.generator(state).log_stride(w)))  # λ(w), metres
 
 
-def apply_code(state, curve_vel_BxTx3, w_BxW, phase_offset_B=None):
+def apply_code(state, curve_vel_BxTx3, w_BxD, phase_offset_B=None):
     """(root_vel_BxTx3, pose_BxTxR) of G for style codes w: the one jitted G of generation,
     analysis and evaluation (compiled once per shape, on G's part of the state; inputs go through
     numpy so that arrays from any computation share one cache entry). `phase_offset_B`: a G with
     a gait phase starts there (radians; None: 0)."""
     phase = None if phase_offset_B is None else np.asarray(phase_offset_B, np.float32)
     return _apply_g(step_lib.generator_state(state), np.asarray(curve_vel_BxTx3, np.float32),
-                    np.asarray(w_BxW, np.float32), phase)
+                    np.asarray(w_BxD, np.float32), phase)
 
 
 def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
