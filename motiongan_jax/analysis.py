@@ -4,8 +4,7 @@ Spec §5.8 (analysis) and §5.7 (style search), with the reference's bugs (§6 i
 All numerics are jnp; plots live in `viz.py`, files are written by `bin/analyze.py`.
 
 Style codes. w = LT(label, z): `style_codes` gives, for every label, w at z = 0 (what the
-inference tools use) and K codes from z ~ N(0, I) (z = 0 again when the model was trained with
-`model.use_z == "zeros"`), whose mean is the style's *centroid*.
+inference tools use) and K codes from z ~ N(0, I), whose mean is the style's *centroid*.
 
 Blending. The AdaIN scale and bias of every layer are affine in w (s = A_s w + a_s,
 b = A_b w + a_b), so blending codes with weights that sum to 1 (`interpolate`, `mix`) gives
@@ -30,7 +29,7 @@ fitted to all windows together (the reference fitted each window separately).
 What to expect from the search (measured, not assumed):
 - The loss over w is rough when windows are short. G's encoder ends at T/8 time samples with
   width 1, so at the tiny config's T = 16 its last instance norms normalise 2 values per channel
-  (close to a sign function) and at the cpu config's T = 32, 4 values; the loss then changes by a
+  (close to a sign function) and at the small config's T = 32, 4 values; the loss then changes by a
   few per cent for steps in w far below the codes' spread, and a local optimiser stalls. Windows
   of 64+ samples (`T=`, `--search-T`; G is convolutional in time) give a smooth loss in which a
   known code is recovered to ~1e-7 (tests/test_analysis.py).
@@ -57,7 +56,7 @@ from flax import nnx
 
 from motiongan_jax import curves, step as step_lib
 from motiongan_jax.nn.layers import AdaIN
-from motiongan_jax.representation import RowLayout, from_rows, to_rows
+from motiongan_jax.representation import LENGTH_UNIT_M, RowLayout, from_rows, to_rows
 
 
 class AnalysisError(ValueError):
@@ -87,7 +86,7 @@ def apply_code(state, curve_vel_BxTx3, w_BxW):
 class StyleCodes:
     style_names: tuple[str, ...]
     zero_CxW: jax.Array  # w = LT(label, z = 0)
-    samples_CxKxW: jax.Array  # w = LT(label, z_k), z_k ~ N(0, I) (zeros under use_z == "zeros")
+    samples_CxKxW: jax.Array  # w = LT(label, z_k), z_k ~ N(0, I)
 
     @property
     def centroids_CxW(self) -> jax.Array:
@@ -108,8 +107,7 @@ def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
     return _latent_w(_g_only(state), jnp.asarray(labels_B, jnp.int32), jnp.asarray(z_BxZ, jnp.float32))
 
 
-def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None, *,
-                use_z: str = "transform") -> StyleCodes:
+def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None) -> StyleCodes:
     """w at z = 0 and K codes per label (z ~ N(0, I) from `key`, default key 0)."""
     C = len(style_names)
     if C < 1 or k < 1:
@@ -118,10 +116,7 @@ def style_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array |
     labels = jnp.arange(C, dtype=jnp.int32)
     zero = latent_codes(state, labels, jnp.zeros((C, Z), jnp.float32))
     rep = jnp.repeat(labels, k)
-    if use_z == "zeros":
-        z = jnp.zeros((C * k, Z), jnp.float32)
-    else:
-        z = jax.random.normal(jax.random.key(0) if key is None else key, (C * k, Z), jnp.float32)
+    z = jax.random.normal(jax.random.key(0) if key is None else key, (C * k, Z), jnp.float32)
     samples = latent_codes(state, rep, z).reshape(C, k, -1)
     chex.assert_shape(samples, (C, k, zero.shape[-1]))
     return StyleCodes(tuple(style_names), zero, samples)
@@ -600,7 +595,7 @@ def _window_losses(root_vel_NxTx3, pose_NxTxR, u_NxTx3, target_pose_NxTxR, vel_w
 
 
 def reconstruction_loss(root_vel_NxTx3, pose_NxTxR, target: MotionWindows, *, vel_weight: float = 0.01,
-                        length_unit: float = 0.056444):
+                        length_unit: float = LENGTH_UNIT_M):
     """vel_weight · MSE(v̂, u) + MSE(P̂, P) per window, lengths in `length_unit` (the losses' CMU
     unit), as in the reference's search. v[0] is left out: it is a reflected duplicate, not a
     step (curves.velocity)."""
@@ -673,7 +668,7 @@ def search_starts(codes: StyleCodes, num_random: int = 4, key: jax.Array | None 
 
 def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence[str] | None = None, *,
                  center_W=None, scale_W=None, steps: int = 200, lr: float = 0.1, warmup: int = 20,
-                 vel_weight: float = 0.01, length_unit: float = 0.056444,
+                 vel_weight: float = 0.01, length_unit: float = LENGTH_UNIT_M,
                  record_every: int = 10) -> SearchResult:
     """Fit one code w to all of the target's windows, from every start at once (one jitted scan).
 
@@ -708,7 +703,7 @@ def style_search(state, target: MotionWindows, starts_SxW, start_names: Sequence
 
 
 def start_losses(state, target: MotionWindows, w_SxW, *, vel_weight: float = 0.01,
-                 length_unit: float = 0.056444) -> np.ndarray:
+                 length_unit: float = LENGTH_UNIT_M) -> np.ndarray:
     """The reconstruction loss of each code as it is (G forward only, one start at a time, with
     the same compiled forward as `reconstruct`)."""
     return np.array([float(jnp.mean(reconstruction_loss(*reconstruct(state, target, w), target,
@@ -718,7 +713,7 @@ def start_losses(state, target: MotionWindows, w_SxW, *, vel_weight: float = 0.0
 
 def search_motion(state, codes: StyleCodes, target: MotionWindows, *, num_random: int = 4,
                   keep: int | None = 4, steps: int = 200, lr: float = 0.1, warmup: int = 20,
-                  vel_weight: float = 0.01, length_unit: float = 0.056444, nearest: int = 3,
+                  vel_weight: float = 0.01, length_unit: float = LENGTH_UNIT_M, nearest: int = 3,
                   key: jax.Array | None = None) -> dict:
     """Style search as the CLI runs it: starts = every centroid + `num_random` draws
     (`search_starts`); the `keep` with the lowest loss as they are are optimised (None: all) in

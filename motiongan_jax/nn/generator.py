@@ -29,7 +29,7 @@ works on exactly 3J rows and c_traj's kernel is kt × 3J. Joint k ≥ 1 still ow
 its position in the row layout gives it in the paper's grouping. For J = 27 the crop is the
 identity and the network is the paper's. J > 27 would need another width stage: rejected.
 
-Output prior (model.output_prior = "rest_and_curve", small configs only; off in the paper's G):
+Output prior (model.output_prior, small configs only; off in the paper's G):
 the pose head adds the skeleton's rest pose (`rest_pose_R`, metres) and the root-velocity head
 adds the input curve velocity. The parameters are the same; G starts as a rest-pose skeleton
 gliding along the curve instead of a collapsed one standing still.
@@ -41,7 +41,7 @@ world rotation of the curve), and its outputs, root velocity and pose (with the 
 which faces +z), are turned by the smoothed heading θs[t] of the curve (`curves.smooth_heading`)
 before the world curve velocity is added. So rotating the curve rotates the motion exactly, and
 the network need not learn to turn the body to the path for every direction the rotation
-augmentation draws: with the world frame, the cpu config's bodies still faced a median 77
+augmentation draws: with the world frame, the small config's bodies still faced a median 77
 degrees away from their path after 6,000 steps (docs/RESULTS.md §5). Same parameters.
 
 Exact bones (model.exact_bones, small configs only; the paper's G has only the bone loss): the
@@ -90,11 +90,11 @@ import jax.numpy as jnp
 from flax import nnx
 
 from motiongan_jax import curves
+from motiongan_jax.config import GFrame, LatentInit, choices
 from motiongan_jax.nn.latent import LatentTransform
 from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, Dense, leaky_relu, upsample_time2, zeros_init
 
 MAX_JOINTS = 27
-FRAMES = ("world", "curve")
 
 
 def project_bones(pose_BxTxR: jax.Array, bones) -> jax.Array:
@@ -167,11 +167,11 @@ class Generator(nnx.Module):
         w_dim: int = 64,
         z_dim: int = 64,
         num_styles: int,
-        latent_init: str = "paper",
+        latent_init: LatentInit = "paper",
         length_unit: float = 1.0,
         rest_pose_R: tuple[float, ...] | None = None,
         residual_root: bool = False,
-        frame: str = "world",
+        frame: GFrame = "world",
         bones: tuple[tuple[int, int, float], ...] | None = None,
         gait_phase: bool = False,
         root_height: bool = False,
@@ -197,8 +197,8 @@ class Generator(nnx.Module):
         # a tuple of floats: static (part of the graph definition), not a parameter
         self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
         self.residual_root = bool(residual_root)
-        if frame not in FRAMES:
-            raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+        if frame not in choices(GFrame):
+            raise ValueError(f"frame must be one of {choices(GFrame)}, got {frame!r}")
         self.frame = frame
         if bones is not None:
             bones = tuple((int(a), int(b), float(length)) for a, b, length in bones)
