@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from motiongan_jax import data, kinematics, synthetic  # noqa: E402
 from motiongan_jax.config import DataConfig  # noqa: E402
-from motiongan_jax.representation import layout_from_skeleton, to_rows  # noqa: E402
+from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton, to_rows  # noqa: E402
 
 SHARED = Path(os.environ.get("MOTIONGAN_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 
@@ -56,8 +56,8 @@ def long_clips() -> tuple[list, list[str]]:
     styles = list(synthetic.STYLES)[:4]
     for i, name in enumerate(styles):
         motion = synthetic.generate_clip(synthetic.STYLES[name], key_or_seed=i, num_frames=2400 + 300 * i, fps=120.0)
-        layout = layout_from_skeleton(motion.skeleton, 0.056444)
-        root, pose = to_rows(kinematics.world_positions(motion)[1:] * 0.056444, layout)
+        layout = layout_from_skeleton(motion.skeleton, CMU_UNIT_M)
+        root, pose = to_rows(kinematics.world_positions(motion)[1:] * CMU_UNIT_M, layout)
         clips.append(data.Clip(name, data.FileLabel(name, 1), 120.0, root.astype(np.float32),
                                pose.astype(np.float32), layout))
     return clips, styles

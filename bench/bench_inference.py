@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
-from bench.bench_train_step import paper_or_cpu  # noqa: E402
+from bench.bench_train_step import paper_or_small  # noqa: E402
 from bench.timing import load  # noqa: E402
 from motiongan_jax import curves, generate, step as step_lib  # noqa: E402
 
@@ -47,7 +47,7 @@ def main():
     ap.add_argument("--lengths", default=f"128,1024,{120 * SAMPLES_PER_S}")
     ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args()
-    cfg, layout, num_styles = paper_or_cpu("paper")
+    cfg, layout, num_styles = paper_or_small("paper")
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; paper G, batch 1; {load()}")
     labels = jnp.array([3], jnp.int32)
     for impl in args.impl.split(","):

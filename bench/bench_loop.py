@@ -13,10 +13,10 @@ is dispatched, as train.py does):
            beside the step's own ops).
 
 "train - fixed" is what data costs the step. Also the sampler alone (jitted, blocked per call).
-The cpu config reads the embedded dataset; the paper shapes use four long synthetic 120 fps
+The small config reads the embedded dataset; the paper shapes use four long synthetic 120 fps
 clips (bench_data.py's set-up: 1024 frames at step 8, FPS and rotation augmentation).
 
-  JAX_PLATFORMS=cpu python bench/bench_loop.py [--which cpu,paper] [--block 20] [--repeats 5]
+  JAX_PLATFORMS=cpu python bench/bench_loop.py [--which small,paper] [--block 20] [--repeats 5]
 """
 
 import argparse
@@ -40,8 +40,8 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 def setup(which: str):
     """(cfg, arrays, layout, num_styles) with real batches for `which`."""
-    if which == "cpu":
-        cfg = load_config(CONFIGS / "cpu.py")
+    if which == "small":
+        cfg = load_config(CONFIGS / "small.py")
         dataset = data.load_dataset(cfg.data, log=lambda s: None)
         clips, styles, layout = dataset.train, dataset.style_names, dataset.layout
     else:
@@ -66,14 +66,14 @@ def per_step(loop, block: int, repeats: int) -> float:
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--which", default="cpu,paper")
+    ap.add_argument("--which", default="small,paper")
     ap.add_argument("--block", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {load()}")
     for which in args.which.split(","):
         cfg, arrays, layout, num_styles = setup(which)
-        block = args.block if which == "cpu" else max(2, args.block // 10)
+        block = args.block if which == "small" else max(2, args.block // 10)
         B = cfg.train.batch_size
         k_data, k_step = jax.random.key(1), jax.random.key(2)
         sample_fn = data.make_sample_batch(cfg.data, B)

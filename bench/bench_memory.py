@@ -6,11 +6,11 @@ size (`ru_maxrss` from os.wait4), so it includes Python, JAX, the compiled step 
 buffers. Two kinds of child:
 
 * `step`: init_state + jitted train_step (state donated) + N steps on synthetic batches of the
-  config's shapes: the training computation alone, for the cpu and the paper config;
-* `train`: `bin/train.py --config configs/cpu.py --steps N` in a temporary workdir: a whole
+  config's shapes: the training computation alone, for the small and the paper config;
+* `train`: `bin/train.py --config configs/small.py --steps N` in a temporary workdir: a whole
   training run (embedded dataset, data pipeline, metrics, checkpoints, a preview).
 
-  JAX_PLATFORMS=cpu python bench/bench_memory.py [--which cpu,paper] [--impl fast,xla] [--steps 3] [--no-train]
+  JAX_PLATFORMS=cpu python bench/bench_memory.py [--which small,paper] [--impl fast,xla] [--steps 3] [--no-train]
 """
 
 import argparse
@@ -27,9 +27,9 @@ CHILD = r"""
 import sys, time
 sys.path.insert(0, {root!r})
 import jax
-from bench.bench_train_step import fake_batch, paper_or_cpu
+from bench.bench_train_step import fake_batch, paper_or_small
 from motiongan_jax import step as step_lib
-cfg, layout, num_styles = paper_or_cpu({which!r})
+cfg, layout, num_styles = paper_or_small({which!r})
 state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl={impl!r})
 step = jax.jit(step_lib.make_train_step(cfg, layout, num_styles), donate_argnums=0)
 batch = fake_batch(cfg.train.batch_size, cfg.data.window_T, layout.num_rows, num_styles, jax.random.key(1))
@@ -53,7 +53,7 @@ def run_child(argv, env=None) -> tuple[float, float, int]:
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--which", default="cpu,paper")
+    ap.add_argument("--which", default="small,paper")
     ap.add_argument("--impl", default="fast,xla")
     ap.add_argument("--steps", type=int, default=3)
     ap.add_argument("--no-train", action="store_true", help="skip the bin/train.py run")
@@ -68,10 +68,10 @@ def main():
                   f"({wall:.0f} s, exit {status})", flush=True)
     if not args.no_train:
         with tempfile.TemporaryDirectory() as tmp:
-            argv = [sys.executable, str(ROOT / "bin" / "train.py"), "--config", str(ROOT / "configs" / "cpu.py"),
+            argv = [sys.executable, str(ROOT / "bin" / "train.py"), "--config", str(ROOT / "configs" / "small.py"),
                     "--workdir", tmp, "--steps", str(max(args.steps, 2)), "--no-progress"]
             rss, wall, status = run_child(argv, dict(env, MOTIONGAN_CACHE=os.path.join(tmp, "cache")))
-            print(f"  bin/train.py --config configs/cpu.py --steps {max(args.steps, 2)} (embedded dataset, "
+            print(f"  bin/train.py --config configs/small.py --steps {max(args.steps, 2)} (embedded dataset, "
                   f"checkpoints, preview): peak RSS {rss:7.0f} MiB ({wall:.0f} s, exit {status})", flush=True)
 
 

@@ -12,7 +12,7 @@ On a CPU the forced devices share the machine's cores, so this shows the cost of
 step and of the collectives, not a speed-up; on GPUs (drop JAX_PLATFORMS=cpu; the layouts are
 then real devices) it shows the scaling.
 
-  JAX_PLATFORMS=cpu python bench/bench_parallel.py [--which cpu] [--layouts 1x1,1x2,2x1]
+  JAX_PLATFORMS=cpu python bench/bench_parallel.py [--which small] [--layouts 1x1,1x2,2x1]
                                                    [--block 10] [--repeats 5] [--set a=b ...]
 """
 
@@ -88,7 +88,7 @@ def child(args) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--which", default="cpu")
+    ap.add_argument("--which", default="small")
     ap.add_argument("--layouts", default="1x1,1x2,2x1")
     ap.add_argument("--block", type=int, default=10)
     ap.add_argument("--repeats", type=int, default=5)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Where a training step's time goes (run by hand, never in CI). Prints medians.
 
-Two views of one jitted train_step at the paper's shapes (or the cpu config's):
+Two views of one jitted train_step at the paper's shapes (or the small config's):
 
 * pieces: the step's parts jitted on their own (G forward; G forward + backward to G's
   parameters; the D update; D's forward + backward for G's loss) and the whole step;
@@ -37,11 +37,12 @@ import jax.numpy as jnp  # noqa: E402
 import optax  # noqa: E402
 from flax import nnx  # noqa: E402
 
-from bench.bench_train_step import fake_batch, paper_or_cpu  # noqa: E402
+from bench.bench_train_step import fake_batch, paper_or_small  # noqa: E402
 from bench.timing import load, median_time  # noqa: E402
 from motiongan_jax import curves, step as step_lib  # noqa: E402
 from motiongan_jax.nn import SpectralNormState  # noqa: E402
 from motiongan_jax.nn.generator import Generator  # noqa: E402
+from motiongan_jax.representation import LENGTH_UNIT_M  # noqa: E402
 
 SCOPES = Generator.BLOCKS + ("heads", "D")
 
@@ -81,7 +82,7 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
         def obj(f):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
             terms = step_lib.g_losses(d, *f, labels, batch["curve_BxTx3"], bone_pairs, bone_lengths, tcfg,
-                                      cfg.model.length_unit)
+                                      LENGTH_UNIT_M)
             return terms["g_total"]
 
         return jax.value_and_grad(obj)(fake)
@@ -142,14 +143,14 @@ def op_profile(compiled, state, batch, key):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--which", default="paper", choices=("paper", "cpu"))
+    ap.add_argument("--which", default="paper", choices=("paper", "small"))
     ap.add_argument("--impl", default="fast", choices=("fast", "xla"))
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-pieces", action="store_true")
     ap.add_argument("--no-ops", action="store_true")
     ap.add_argument("--top", type=int, default=0, help="also list the N slowest ops")
     args = ap.parse_args()
-    cfg, layout, num_styles = paper_or_cpu(args.which)
+    cfg, layout, num_styles = paper_or_small(args.which)
     B, T = cfg.train.batch_size, cfg.data.window_T
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {args.which}: B {B}, T {T}, impl {args.impl}; {load()}")
     state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=args.impl)

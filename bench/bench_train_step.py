@@ -3,7 +3,7 @@
 
 Times one jitted train_step (D update then G update, state donated) on synthetic batches of the
 right shapes: the paper's (B 24, T 128, CMU skeleton 27 joints -> 81 rows, 28 styles, top 64) and
-the cpu config's. Reports compile time, median wall and process-CPU seconds per step, the load
+the small config's. Reports compile time, median wall and process-CPU seconds per step, the load
 average (the machine is shared: compare runs taken close together) and XLA's flop count of the
 compiled step. Reference PyTorch on this machine kind, 2 threads: median 8.57 s per iteration
 at the paper's shapes (G forward 3.1 s, D update 0.24 s, G update 5.0 s).
@@ -14,7 +14,7 @@ plain lax.conv), `--impl fast` (default) the rewrites of nn/conv.py and nn/gener
 `--dtype bfloat16` times mixed precision (bf16 activations, float32 parameters and optimizer
 state). On a GPU (drop JAX_PLATFORMS=cpu) it also prints it/s and the allocator's peak memory.
 
-  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,cpu] [--impl fast,xla]
+  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,small] [--impl fast,xla]
                                                      [--dtype float32,bfloat16] [--repeats 5]
 """
 
@@ -33,18 +33,18 @@ import jax.numpy as jnp  # noqa: E402
 from bench.timing import load  # noqa: E402
 from motiongan_jax import step as step_lib, synthetic  # noqa: E402
 from motiongan_jax.config import load_config, override  # noqa: E402
-from motiongan_jax.representation import layout_from_skeleton  # noqa: E402
+from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 REFERENCE_STEP_S = 8.57
 
 
 
-def paper_or_cpu(which: str):
+def paper_or_small(which: str):
     """(cfg, layout, num_styles) of configs/<which>.py on the CMU skeleton, no data needed."""
     cfg = load_config(CONFIGS / f"{which}.py", check=False)
     cfg = override(cfg, ["data.data_dir=None", "data.label_rule=synthetic"])
-    layout = layout_from_skeleton(synthetic.cmu_skeleton(), 0.056444)
+    layout = layout_from_skeleton(synthetic.cmu_skeleton(), CMU_UNIT_M)
     num_styles = 28 if which == "paper" else len(synthetic.STYLES)
     return cfg, layout, num_styles
 
@@ -98,7 +98,7 @@ def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--which", default="paper,cpu")
+    ap.add_argument("--which", default="paper,small")
     ap.add_argument("--impl", default="fast", help="comma list of fast, xla")
     ap.add_argument("--dtype", default="float32", help="comma list of float32, bfloat16 (compute dtype)")
     ap.add_argument("--repeats", type=int, default=5)
@@ -106,7 +106,7 @@ def main():
     print(f"jax {jax.__version__} on {jax.devices()[0].platform} ({jax.devices()[0].device_kind}), "
           f"{os.cpu_count()} cpus; {load()}")
     for which in args.which.split(","):
-        cfg, layout, num_styles = paper_or_cpu(which)
+        cfg, layout, num_styles = paper_or_small(which)
         for impl, dtype in [(i, d) for i in args.impl.split(",") for d in args.dtype.split(",")]:
             med = bench(which, cfg, layout, num_styles, args.repeats, impl, dtype)
             if which == "paper":

@@ -74,6 +74,7 @@ def run(args, log=print) -> dict:
 
     from motiongan_jax import analysis as A
     from motiongan_jax import atomic, pretrained, viz
+    from motiongan_jax.representation import LENGTH_UNIT_M
 
     out = Path(args.out)
     state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
@@ -82,7 +83,7 @@ def run(args, log=print) -> dict:
     C = len(names)
     key = jax.random.key(args.seed)
     k_codes, k_search = jax.random.split(key)
-    codes = A.label_codes(state, names, args.k, k_codes, use_z=cfg.model.use_z)
+    codes = A.label_codes(state, names, args.k, k_codes)
     X, labels = codes.flat_samples
     p = A.pca(X)
     pts = A.pca_transform(p, X)
@@ -96,9 +97,8 @@ def run(args, log=print) -> dict:
         "workdir": None if args.workdir is None else str(args.workdir),
         "model": None if args.workdir is not None else str(args.model or pretrained.SHIPPED_MODEL.name),
         "step": int(state.step), "style_names": names, "k": args.k,
-        "seed": args.seed, "use_z": cfg.model.use_z, "w_dim": int(X.shape[1]),
-        "pca": {"fit_on": f"{C} x {args.k} codes w = LT(label, z), z ~ N(0, I)"
-                          + (" (z = 0: model.use_z is 'zeros')" if cfg.model.use_z == "zeros" else ""),
+        "seed": args.seed, "w_dim": int(X.shape[1]),
+        "pca": {"fit_on": f"{C} x {args.k} codes w = LT(label, z), z ~ N(0, I)",
                 "explained_variance_ratio": evr, "explained_variance": np.asarray(p.explained_variance_K)},
         "distance": {"metric": "Euclidean between centroids (mean of the K codes)", "matrix": dist,
                      "mean_offdiagonal": float(dist[~np.eye(C, dtype=bool)].mean()) if C > 1 else 0.0,
@@ -122,8 +122,7 @@ def run(args, log=print) -> dict:
         target = A.motion_windows(args.search, meta, cfg, layout, max_windows=args.search_windows,
                                   T=args.search_T)
         found = A.search_motion(state, codes, target, num_random=args.search_random, keep=args.search_keep,
-                                steps=args.search_steps, lr=args.search_lr, key=k_search,
-                                length_unit=cfg.model.length_unit)
+                                steps=args.search_steps, lr=args.search_lr, key=k_search)
         res = found["result"]
         marks[f"search: {Path(args.search).stem}"] = tuple(two(A.pca_transform(p, res.w_D[None]))[0])
         rv, pose = A.reconstruct(state, target, res.w_D)
@@ -138,7 +137,7 @@ def run(args, log=print) -> dict:
             "source": str(args.search), "windows": int(target.root_NxTx3.shape[0]),
             "window_T": int(target.root_NxTx3.shape[1]), "frame_step": target.frame_step,
             "start_frames": target.start_frames, "speed_m_per_sample": spacing,
-            "loss": "0.01 MSE(root velocity) + MSE(pose rows), lengths in CMU units (0.056444 m)",
+            "loss": f"0.01 MSE(root velocity) + MSE(pose rows), lengths in CMU units ({LENGTH_UNIT_M} m)",
             "steps": args.search_steps, "lr": args.search_lr,
             "screen_loss": found["screen"],
             "starts": [{"start": n, "initial_loss": float(a), "final_loss": float(b)}

@@ -1,8 +1,8 @@
 #!/usr/bin/env python
 """Evaluate a trained run with the project's protocol (docs/DESIGN.md §7).
 
-  python bin/evaluate.py --workdir runs/cpu --out runs/cpu/eval
-                         [--data DATA_DIR] [--evaluator runs/cpu/evaluator.npz]
+  python bin/evaluate.py --workdir runs/small --out runs/small/eval
+                         [--data DATA_DIR] [--evaluator runs/small/evaluator.npz]
                          [--cmu-curves DATA_DIR/cmu] [--seeds 0,1,2] [--k 3] [--step N]
 
 Generates for every (unseen curve × style) with K noise draws and each seed; unseen curves are

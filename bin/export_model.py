@@ -2,7 +2,7 @@
 """Export a trained model for generation: G's parameters and the meta needed to use them, in one
 small .npz with its provenance and a checksum (motiongan_jax/pretrained.py).
 
-  python bin/export_model.py --workdir runs/cpu --out model.npz [--step N] [--params ema|raw]
+  python bin/export_model.py --workdir runs/small --out model.npz [--step N] [--params ema|raw]
   python bin/export_model.py --info model.npz          # check a file and print its provenance
 
 The export loads wherever a run's --workdir does: `bin/generate.py --model model.npz`,

@@ -1,11 +1,11 @@
 #!/usr/bin/env python
 """Generate styled walks along a curve with a trained MotionGAN.
 
-  python bin/generate.py --workdir runs/cpu --style Happy --curve s_curve --out walk.bvh
-  python bin/generate.py --workdir runs/cpu --style "Sad:0.3,Happy:0.7" --curve path.csv --out walk.gif
-  python bin/generate.py --workdir runs/cpu --style "OldMan - Normal + Marching" --curve circle --out w.npz
-  python bin/generate.py --workdir runs/cpu --figure interp --style Sad,Happy --curve line --length 8 --out fig.png
-  python bin/generate.py --workdir runs/cpu --list-styles
+  python bin/generate.py --workdir runs/small --style Happy --curve s_curve --out walk.bvh
+  python bin/generate.py --workdir runs/small --style "Sad:0.3,Happy:0.7" --curve path.csv --out walk.gif
+  python bin/generate.py --workdir runs/small --style "OldMan - Normal + Marching" --curve circle --out w.npz
+  python bin/generate.py --workdir runs/small --figure interp --style Sad,Happy --curve line --length 8 --out fig.png
+  python bin/generate.py --workdir runs/small --list-styles
   python bin/generate.py --style Happy --curve s_curve --out walk.gif     # the shipped model
 
 --workdir: a training run (its latest checkpoint, or --step); --model: an export file

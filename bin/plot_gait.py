@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Toe heights over time, real against generated, per style: does G walk?
 
-  python bin/plot_gait.py --workdir runs/cpu --out runs/cpu/gait.png [--seconds 6] [--step N] [--params ema|raw]
+  python bin/plot_gait.py --workdir runs/small --out runs/small/gait.png [--seconds 6] [--step N] [--params ema|raw]
 
 For each style, the first held-out clip of that style (left) and G walking that clip's path in its
 style (right): the heights of both toes above the floor, the band below the contact height

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Loss curves of a training run: a PNG and a Markdown table of running means at a few steps.
 
-  python bin/plot_metrics.py --workdir runs/cpu --out runs/cpu/losses.png [--every 500]
+  python bin/plot_metrics.py --workdir runs/small --out runs/small/losses.png [--every 500]
 """
 
 import argparse

@@ -15,6 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from motiongan_jax.bvh import BVHError  # noqa: E402
 from motiongan_jax.data import DataError  # noqa: E402
+from motiongan_jax.config import LabelRule, choices  # noqa: E402
 from motiongan_jax.dataset_export import export_positions  # noqa: E402
 
 
@@ -22,7 +23,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("data_dir")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--labels", choices=("paper", "bandai", "cmu", "synthetic"), default="paper",
+    ap.add_argument("--labels", choices=choices(LabelRule), default="paper",
                     help="file-name rule for style labels (also picks the unit: bandai cm, else CMU units)")
     ap.add_argument("--units-to-m", type=float, default=None, help="metres per file unit (overrides --labels)")
     ap.add_argument("--skip-bad", action="store_true", help="report malformed files and go on with the rest")

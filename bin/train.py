@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Train MotionGAN, or resume the run in --workdir.
 
-  python bin/train.py --config configs/cpu.py --workdir runs/cpu [--data DATA_DIR] [--seed N]
+  python bin/train.py --config configs/small.py --workdir runs/small [--data DATA_DIR] [--seed N]
                       [--steps N] [--set section.field=value ...] [--dry-run]
 
 Without --data it trains on the embedded default dataset (procedural styled walks, generated

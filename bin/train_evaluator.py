@@ -1,9 +1,9 @@
 #!/usr/bin/env python
 """Train the style evaluator (a temporal CNN, not the discriminator) on real training windows.
 
-  python bin/train_evaluator.py --config configs/cpu.py --out runs/cpu/evaluator.npz
+  python bin/train_evaluator.py --config configs/small.py --out runs/small/evaluator.npz
                                 [--data DATA_DIR] [--set field=value ...] [--steps N] [--seed N]
-  python bin/train_evaluator.py --workdir runs/cpu            # the run's config and data
+  python bin/train_evaluator.py --workdir runs/small            # the run's config and data
 
 Uses the config's data settings and training split (the validation split is held out), with the
 training sampler's FPS augmentation. Writes OUT (.npz) and OUT with .json (meta and the weights'

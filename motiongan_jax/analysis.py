@@ -4,8 +4,8 @@ docs/DESIGN.md §5.2 (analysis) and §5.3 (style search), with the reference's b
 All numerics are jnp; plots live in `viz.py`, files are written by `bin/analyze.py`.
 
 Style codes. w = LT(label, z) (`generate.latent_codes`): `label_codes` gives, for every label,
-w at z = 0 (what the inference tools use) and K codes from z ~ N(0, I) (z = 0 again when the
-model was trained with `model.use_z == "zeros"`), whose mean is the style's *centroid*.
+w at z = 0 (what the inference tools use) and K codes from z ~ N(0, I), whose mean is the
+style's *centroid*.
 
 Blending. The AdaIN scale and bias of every layer are affine in w (s = A_s w + a_s,
 b = A_b w + a_b), so blending codes with weights that sum to 1 (`interpolate`, `mix`) gives
@@ -49,7 +49,7 @@ from flax import nnx
 
 from motiongan_jax import curves, generate, step as step_lib
 from motiongan_jax.nn.layers import AdaIN
-from motiongan_jax.representation import RowLayout, to_rows
+from motiongan_jax.representation import LENGTH_UNIT_M, RowLayout, from_rows, to_rows
 
 
 class AnalysisError(ValueError):
@@ -65,7 +65,7 @@ class AnalysisError(ValueError):
 class StyleCodes:
     style_names: tuple[str, ...]
     zero_CxD: jax.Array  # w = LT(label, z = 0)
-    samples_CxKxD: jax.Array  # w = LT(label, z_k), z_k ~ N(0, I) (zeros under use_z == "zeros")
+    samples_CxKxD: jax.Array  # w = LT(label, z_k), z_k ~ N(0, I)
 
     @property
     def centroids_CxD(self) -> jax.Array:
@@ -78,8 +78,7 @@ class StyleCodes:
         return self.samples_CxKxD.reshape(C * K, D), jnp.repeat(jnp.arange(C, dtype=jnp.int32), K)
 
 
-def label_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None, *,
-                use_z: str = "transform") -> StyleCodes:
+def label_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array | None = None) -> StyleCodes:
     """w at z = 0 and K codes per label (z ~ N(0, I) from `key`, default key 0)."""
     C = len(style_names)
     if C < 1 or k < 1:
@@ -88,10 +87,7 @@ def label_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array |
     labels = jnp.arange(C, dtype=jnp.int32)
     zero = generate.latent_codes(state, labels, jnp.zeros((C, Z), jnp.float32))
     rep = jnp.repeat(labels, k)
-    if use_z == "zeros":
-        z = jnp.zeros((C * k, Z), jnp.float32)
-    else:
-        z = jax.random.normal(jax.random.key(0) if key is None else key, (C * k, Z), jnp.float32)
+    z = jax.random.normal(jax.random.key(0) if key is None else key, (C * k, Z), jnp.float32)
     samples = generate.latent_codes(state, rep, z).reshape(C, k, -1)
     chex.assert_shape(samples, (C, k, zero.shape[-1]))
     return StyleCodes(tuple(style_names), zero, samples)
@@ -567,7 +563,7 @@ def _window_losses(root_vel_NxTx3, pose_NxTxR, u_NxTx3, target_pose_NxTxR, vel_w
 
 
 def reconstruction_loss(root_vel_NxTx3, pose_NxTxR, target: MotionWindows, *, vel_weight: float = 0.01,
-                        length_unit: float = 0.056444):
+                        length_unit: float = LENGTH_UNIT_M):
     """vel_weight · MSE(v̂, u) + MSE(P̂, P) per window, lengths in `length_unit` (the losses' CMU
     unit), as in the reference's search. v[0] is left out: it is a reflected duplicate, not a
     step (curves.velocity)."""
@@ -640,7 +636,7 @@ def search_starts(codes: StyleCodes, num_random: int = 4, key: jax.Array | None 
 
 def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence[str] | None = None, *,
                  center_D=None, scale_D=None, steps: int = 200, lr: float = 0.1, warmup: int = 20,
-                 vel_weight: float = 0.01, length_unit: float = 0.056444,
+                 vel_weight: float = 0.01, length_unit: float = LENGTH_UNIT_M,
                  record_every: int = 10) -> SearchResult:
     """Fit one code w to all of the target's windows, from every start at once (one jitted scan).
 
@@ -675,7 +671,7 @@ def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence
 
 
 def start_losses(state, target: MotionWindows, w_SxD, *, vel_weight: float = 0.01,
-                 length_unit: float = 0.056444) -> np.ndarray:
+                 length_unit: float = LENGTH_UNIT_M) -> np.ndarray:
     """The reconstruction loss of each code as it is (G forward only, one start at a time, with
     the same compiled forward as `reconstruct`)."""
     return np.array([float(jnp.mean(reconstruction_loss(*reconstruct(state, target, w), target,
@@ -685,7 +681,7 @@ def start_losses(state, target: MotionWindows, w_SxD, *, vel_weight: float = 0.0
 
 def search_motion(state, codes: StyleCodes, target: MotionWindows, *, num_random: int = 4,
                   keep: int | None = 4, steps: int = 200, lr: float = 0.1, warmup: int = 20,
-                  vel_weight: float = 0.01, length_unit: float = 0.056444, nearest: int = 3,
+                  vel_weight: float = 0.01, length_unit: float = LENGTH_UNIT_M, nearest: int = 3,
                   key: jax.Array | None = None) -> dict:
     """Style search as the CLI runs it: starts = every centroid + `num_random` draws
     (`search_starts`); the `keep` with the lowest loss as they are are optimised (None: all) in

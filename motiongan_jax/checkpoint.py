@@ -9,7 +9,6 @@ checkpoint that `latest_step` would pick up.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
-from motiongan_jax.config import RETIRED_FIELDS, ModelConfig
+from motiongan_jax.config import from_dict
 
 
 class CheckpointError(RuntimeError):
@@ -45,19 +44,11 @@ def read_meta(mngr: ocp.CheckpointManager, step: int | None = None) -> tuple[int
 def restore(mngr: ocp.CheckpointManager, step: int, like_state):
     """Restore the state at `step` with the structure, shapes, dtypes and shardings of
     `like_state`; leaves without a sharding (jax.eval_shape's) go to this process's first device,
-    so a checkpoint written by several devices or processes loads on one. Checkpoints written
-    before a state field existed restore when `like_state` leaves that field None (see
-    _LATER_FIELDS)."""
+    so a checkpoint written by several devices or processes loads on one."""
     abstract = jax.tree.map(_target, like_state)
     try:
-        return _restore(mngr, step, abstract)
+        return mngr.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))["state"]
     except (ValueError, KeyError, TypeError) as err:
-        older = _older_layout(abstract)
-        if older is not None:
-            try:
-                return abstract.replace(**_restore(mngr, step, older))
-            except (ValueError, KeyError, TypeError):
-                pass
         raise CheckpointError(f"checkpoint {mngr.directory}/{step} does not fit this model: {err}") from err
 
 
@@ -69,23 +60,6 @@ def _target(leaf):
     return target
 
 
-# TrainState fields added after checkpoints already existed; None when their option is off
-_LATER_FIELDS = ("g_ema_params",)
-
-
-def _restore(mngr, step, abstract):
-    return mngr.restore(step, args=ocp.args.Composite(state=ocp.args.StandardRestore(abstract)))["state"]
-
-
-def _older_layout(abstract) -> dict | None:
-    """The state as the fields a checkpoint from before _LATER_FIELDS holds, or None when a
-    later field is in use (such a state cannot come from an older checkpoint)."""
-    if not dataclasses.is_dataclass(abstract) or any(getattr(abstract, f, None) is not None for f in _LATER_FIELDS):
-        return None
-    return {f.name: getattr(abstract, f.name) for f in dataclasses.fields(abstract)
-            if f.name not in _LATER_FIELDS and f.metadata.get("pytree_node", True)}
-
-
 def check_compatible(meta: dict, expected: dict, where: str) -> None:
     """Refuse a checkpoint made for another skeleton, style list or architecture."""
     for key in ("style_names", "joint_names", "parents", "model", "window_T"):
@@ -95,20 +69,11 @@ def check_compatible(meta: dict, expected: dict, where: str) -> None:
                 f"this run needs {expected[key]!r}")
 
 
-# model fields that choose how the same parameters are computed, not what they are: a run may
-# resume or be evaluated with another value
-_COMPUTE_ONLY = ("conv_impl", "compute_dtype")
-
-
 def _architecture(key: str, value):
-    value = _jsonable(value)
     if key == "model" and isinstance(value, dict):
-        # a field missing from an older checkpoint's meta predates that option, whose default is
-        # what the run was trained with
-        value = {**_jsonable(dataclasses.asdict(ModelConfig())), **value}
-        value = {k: v for k, v in value.items() if k not in RETIRED_FIELDS["model"] or v != list(RETIRED_FIELDS["model"][k])}
-        value = {k: v for k, v in value.items() if k not in _COMPUTE_ONLY}
-    return value
+        # the model section whole, in this version's schema (config.upgrade), defaults filled in
+        return from_dict({"model": value}).model
+    return _jsonable(value)
 
 
 def _jsonable(x):

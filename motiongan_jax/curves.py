@@ -300,9 +300,8 @@ def heading(v_BxTx3):
 
 def window_frame(root_vel_BxTx3, pose_BxTxR):
     """Root velocity and pose rows turned about +y so that each window's travel, the sum of its
-    root velocities after the first (v[0] duplicates v[1], `velocity`), points along +z: D's input
-    frame (model.d_frame "window") and the evaluator's canonical frame. A window that does not
-    move keeps its orientation (heading 0)."""
+    root velocities after the first (v[0] duplicates v[1], `velocity`), points along +z: the
+    evaluator's canonical frame. A window that does not move keeps its orientation (heading 0)."""
     theta_B = heading(jnp.sum(root_vel_BxTx3[:, 1:], axis=1))
     b, t, r = pose_BxTxR.shape
     pose = rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), -theta_B).reshape(b, t, r)

@@ -452,8 +452,7 @@ def _search_block(ctx: Context) -> dict:
         except analysis.AnalysisError:
             continue
         taken[clip.label.style] = taken.get(clip.label.style, 0) + 1
-        res = analysis.search_motion(ctx.state, codes, target, steps=s.search_steps,
-                                     length_unit=ctx.cfg.model.length_unit)
+        res = analysis.search_motion(ctx.state, codes, target, steps=s.search_steps)
         hits.append(res["nearest"][0][0] == clip.label.style)
         losses.append(res["result"].loss)
     if not hits:

@@ -761,22 +761,11 @@ def check_output_size(out, frames: int, count: int = 1) -> None:
                             f"GIF frames are held in memory): write .mp4, .bvh or .npz, or a shorter curve")
 
 
-def rest_offsets(layout, positions_TxJx3=None, log: Callable[[str], None] | None = None) -> np.ndarray:
-    """The export skeleton's rest offsets: the layout's (checkpoints since rest offsets were
-    stored), else the bone directions of the first frame at the layout's bone lengths."""
-    if layout.rest_offsets_m is not None:
-        return np.asarray(layout.rest_offsets_m, np.float64)
-    if positions_TxJx3 is None:
-        raise GenerateError("this checkpoint stores no rest offsets (older than BVH export): "
-                            "a rest pose is needed")
-    p0 = np.asarray(positions_TxJx3, np.float64)[0]
-    par = np.asarray(layout.parents[1:])
-    d = p0[1:] - p0[par]
-    n = np.linalg.norm(d, axis=-1, keepdims=True)
-    d = np.where(n > 1e-9, d / np.maximum(n, 1e-12), np.array([0.0, 1.0, 0.0]))
-    if log is not None:
-        log("note: the checkpoint stores no rest offsets; the BVH rest pose is the first frame's pose")
-    return np.concatenate([np.zeros((1, 3)), d * np.asarray(layout.bone_lengths_m)[:, None]])
+def rest_offsets(layout) -> np.ndarray:
+    """The export skeleton's rest offsets: the layout's (every checkpoint stores them)."""
+    if layout.rest_offsets_m is None:
+        raise GenerateError("this layout has no rest offsets: a BVH export needs the skeleton's rest pose")
+    return np.asarray(layout.rest_offsets_m, np.float64)
 
 
 def to_bvh_motion(positions_TxJx3, layout, fps: float, units: str = "m", log=None,
@@ -788,7 +777,7 @@ def to_bvh_motion(positions_TxJx3, layout, fps: float, units: str = "m", log=Non
         raise GenerateError(f"BVH units must be one of {', '.join(BVH_UNITS)}, got {units!r}")
     if hierarchy not in ik.HIERARCHIES:
         raise GenerateError(f"BVH hierarchy must be one of {', '.join(ik.HIERARCHIES)}, got {hierarchy!r}")
-    rest = rest_offsets(layout, positions_TxJx3, log)
+    rest = rest_offsets(layout)
     scale = BVH_UNITS[units]
     motion = ik.positions_to_motion(positions_TxJx3, layout.joint_names, layout.parents, rest,
                                     1.0 / fps, units_per_m=scale, hierarchy=hierarchy)

@@ -8,7 +8,7 @@ Two forms of the GAN and class losses, chosen by `TrainConfig.gan_loss`:
 * "bce_logit": sigmoid BCE on logits and softmax cross-entropy, numerically stable.
 
 Units. Data are in metres, the paper's loss weights were tuned on CMU units (1 unit = 0.056444 m).
-The curve and bone losses divide every length by `unit` (ModelConfig.length_unit) so their
+The curve and bone losses divide every length by `unit` (representation.LENGTH_UNIT_M) so their
 size relative to the GAN terms is the paper's.
 """
 
@@ -22,8 +22,8 @@ import numpy as np
 import optax
 
 from motiongan_jax import curves, representation
+from motiongan_jax.config import GanLoss, choices
 
-GAN_LOSSES = ("bce_prob", "bce_logit")
 REAL_TARGET = 0.9  # label smoothing of the reference
 FAKE_TARGET = 0.1
 _LOG_CLAMP = -100.0
@@ -58,16 +58,16 @@ def bce_prob(p: jax.Array, target) -> jax.Array:
     return jnp.mean(_bce_elementwise(p, jnp.broadcast_to(jnp.asarray(target, p.dtype), p.shape)))
 
 
-def adversarial_loss(logits_B: jax.Array, target: float, mode: str = "bce_prob") -> jax.Array:
+def adversarial_loss(logits_B: jax.Array, target: float, mode: GanLoss = "bce_prob") -> jax.Array:
     """BCE of D's real/fake logit against a constant target (0.9 real, 0.1 fake)."""
     if mode == "bce_prob":
         return bce_prob(jax.nn.sigmoid(logits_B), target)
     if mode == "bce_logit":
         return jnp.mean(optax.sigmoid_binary_cross_entropy(logits_B, jnp.full_like(logits_B, target)))
-    raise ValueError(f"unknown gan loss {mode!r}; one of {GAN_LOSSES}")
+    raise ValueError(f"unknown gan loss {mode!r}; one of {choices(GanLoss)}")
 
 
-def class_loss(logits_BxC: jax.Array, labels_B: jax.Array, mode: str = "bce_prob") -> jax.Array:
+def class_loss(logits_BxC: jax.Array, labels_B: jax.Array, mode: GanLoss = "bce_prob") -> jax.Array:
     """Style-class loss. bce_prob: BCE(softmax, one-hot) averaged over B x C (the reference's,
     not a cross-entropy); bce_logit: softmax cross-entropy averaged over B."""
     if mode == "bce_prob":
@@ -75,7 +75,7 @@ def class_loss(logits_BxC: jax.Array, labels_B: jax.Array, mode: str = "bce_prob
         return bce_prob(jax.nn.softmax(logits_BxC, axis=-1), onehot)
     if mode == "bce_logit":
         return jnp.mean(optax.softmax_cross_entropy_with_integer_labels(logits_BxC, labels_B))
-    raise ValueError(f"unknown gan loss {mode!r}; one of {GAN_LOSSES}")
+    raise ValueError(f"unknown gan loss {mode!r}; one of {choices(GanLoss)}")
 
 
 def curve_loss(root_vel_BxTx3: jax.Array, curve_BxTx3: jax.Array, points: int = 4,

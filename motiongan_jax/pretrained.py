@@ -39,7 +39,7 @@ import numpy as np
 
 from motiongan_jax import atomic, checkpoint
 
-SHIPPED_MODEL = Path(__file__).resolve().parent / "weights" / "cpu.npz"
+SHIPPED_MODEL = Path(__file__).resolve().parent / "weights" / "small.npz"
 FORMAT = "motiongan_jax inference export"
 VERSION = 1
 _PARAM_PREFIX = "g/"
@@ -112,8 +112,9 @@ def export_state(out, state, meta: dict, *, params: str) -> dict:
     cfg = from_dict(meta["config"])
     arrays = _flat_params(state.g_params)
     commit, dirty = source_commit()
-    provenance = {
-        "format": FORMAT, "version": VERSION, "config_name": cfg.name, "config_hash": config_hash(cfg),
+    provenance = {  # the config's name and hash as the run saved it (its config_hash)
+        "format": FORMAT, "version": VERSION, "config_name": meta["config"].get("name", cfg.name),
+        "config_hash": config_hash(meta["config"]),
         "seed": int(cfg.train.seed), "steps": int(state.step), "params": params,
         "source_commit": commit, "source_modified": dirty,
         "jax": jax.__version__, "flax": flax.__version__, "numpy": np.__version__,

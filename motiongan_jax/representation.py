@@ -22,14 +22,20 @@ import numpy as np
 
 from motiongan_jax.bvh import Skeleton
 
-# Metres per file unit, by source. CMU's unit is the paper's: 1 unit = 0.056444 m.
-UNITS_TO_M = {"cmu": 0.056444, "paper": 0.056444, "synthetic": 0.056444, "bandai": 0.01, "bandai_session": 0.01}
+# Metres per CMU unit: the paper's unit of length (its data were CMU mocap).
+CMU_UNIT_M = 0.056444
+# The networks' unit of length: G and D see lengths divided by it and the curve, bone and foot
+# losses are measured in it, so that the instance norms and the paper's loss weights see the
+# scale they were made for (in metres the first norm's variances would be near its epsilon).
+LENGTH_UNIT_M = CMU_UNIT_M
+# Metres per file unit, by source.
+UNITS_TO_M = {"cmu": CMU_UNIT_M, "paper": CMU_UNIT_M, "synthetic": CMU_UNIT_M, "bandai": 0.01, "bandai_session": 0.01}
 
 _ZERO_LENGTH_SQ = 1e-8
 
 # Units a BVH file is likely to be in, for files whose source is not known (a curve from a BVH):
 # chosen by which makes the leg about 0.9 m long.
-_COMMON_UNITS = {"CMU units": 0.056444, "centimetres": 0.01, "inches": 0.0254, "metres": 1.0}
+_COMMON_UNITS = {"CMU units": CMU_UNIT_M, "centimetres": 0.01, "inches": 0.0254, "metres": 1.0}
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -3,7 +3,7 @@
 The modules are split once into graph definitions (static) and state (arrays); `train_step` is a
 pure function that merges them inside, so the caller can `jax.jit(..., donate_argnums=0)` it.
 
-    key -> fake labels ŷ ~ U{0..C-1} (independent of the batch), z ~ N(0, I) (or zeros)
+    key -> fake labels ŷ ~ U{0..C-1} (independent of the batch), z ~ N(0, I)
     one G forward on velocity(curve): (v̂, P̂), kept with its VJP
     D update:  L_D = w_adv [BCE(D(v̂, P̂)ᵃ, 0.1) + BCE(D(u, P)ᵃ, 0.9)] + w_cls BCE(D(u, P)ᶜ, y)
                on the detached fake; Adam step for D
@@ -31,7 +31,8 @@ import optax
 from flax import nnx, struct
 
 from motiongan_jax import curves, losses
-from motiongan_jax.representation import rest_positions
+from motiongan_jax.config import GanLoss, choices
+from motiongan_jax.representation import LENGTH_UNIT_M, rest_positions
 from motiongan_jax.nn import Discriminator, Generator, SpectralNormState, init_split
 
 
@@ -56,26 +57,26 @@ def _num_rel_joints(layout) -> int:
 
 
 def output_prior_rows(model_cfg, layout) -> tuple[float, ...] | None:
-    """The rest pose rows (metres) G adds to its pose head under model.output_prior
-    "rest_and_curve"; None for the paper's G ("none")."""
-    if model_cfg.output_prior == "none":
+    """The rest pose rows (metres) G adds to its pose head under model.output_prior; None for
+    the paper's G."""
+    if not model_cfg.output_prior:
         return None
     if layout is None or layout.rest_offsets_m is None:
-        raise ValueError("model.output_prior='rest_and_curve' needs the skeleton's rest offsets")
+        raise ValueError("model.output_prior needs the skeleton's rest offsets")
     return tuple(float(v) for v in rest_positions(layout)[1:].reshape(-1))
 
 
-def conv_impl(model_cfg, impl: str | None = None) -> str:
-    """How G and D run their convolutions: `impl` if given, else `model.conv_impl` ("fast":
+def conv_impl(cfg, impl: str | None = None) -> str:
+    """How G and D run their convolutions: `impl` if given, else `compute.conv_impl` ("fast":
     nn/conv.py; "xla": the straightforward form; same parameters)."""
-    return impl if impl is not None else model_cfg.conv_impl
+    return impl if impl is not None else cfg.compute.conv_impl
 
 
-def compute_dtype(model_cfg, dtype: str | None = None) -> str:
-    """G's and D's activation dtype: `dtype` if given, else `model.compute_dtype`. "bfloat16" is
+def compute_dtype(cfg, dtype: str | None = None) -> str:
+    """G's and D's activation dtype: `dtype` if given, else `compute.compute_dtype`. "bfloat16" is
     mixed precision (for GPUs): parameters, optimizer state, normalisation statistics and losses
     stay float32."""
-    return dtype if dtype is not None else model_cfg.compute_dtype
+    return dtype if dtype is not None else cfg.compute.compute_dtype
 
 
 def generator_bones(model_cfg, layout) -> tuple[tuple[int, int, float], ...] | None:
@@ -91,8 +92,8 @@ def _build_g(model_cfg, num_rel_joints: int, num_styles: int, rest_pose_R, key, 
              dtype: str = "float32", bones=None) -> Generator:
     m = model_cfg
     return Generator(num_rel_joints, base_channels=m.top, kt=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
-                     num_styles=num_styles, latent_init=m.latent_init, length_unit=m.length_unit,
-                     rest_pose_R=rest_pose_R, residual_root=m.output_prior != "none", frame=m.g_frame, bones=bones,
+                     num_styles=num_styles, latent_init=m.latent_init, length_unit=LENGTH_UNIT_M,
+                     rest_pose_R=rest_pose_R, residual_root=m.output_prior, frame=m.g_frame, bones=bones,
                      gait_phase=m.gait_phase, root_height=m.root_height, impl=impl, compute_dtype=dtype,
                      rngs=nnx.Rngs(key))
 
@@ -100,8 +101,8 @@ def _build_g(model_cfg, num_rel_joints: int, num_styles: int, rest_pose_R, key, 
 def _build_d(model_cfg, seq_len: int, num_rel_joints: int, num_styles: int, key, impl: str = "fast",
              dtype: str = "float32") -> Discriminator:
     return Discriminator(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.top,
-                         kt=model_cfg.kw, length_unit=model_cfg.length_unit, impl=impl,
-                         compute_dtype=dtype, frame=model_cfg.d_frame, cond=model_cfg.d_cond,
+                         kt=model_cfg.kw, length_unit=LENGTH_UNIT_M, impl=impl,
+                         compute_dtype=dtype, projection=model_cfg.d_cond,
                          rngs=nnx.Rngs(key))
 
 
@@ -109,10 +110,10 @@ def build_models(cfg, num_rel_joints: int, num_styles: int, key: jax.Array, layo
                  impl: str | None = None, dtype: str | None = None) -> tuple[Generator, Discriminator]:
     """(G, D) as NNX modules from a full Config, initialised like `init_state` with this key (equal
     up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only.
-    `layout` is needed only for model.output_prior != "none"; `impl`, `dtype`: see `conv_impl`,
+    `layout` is needed only for model.output_prior and exact_bones; `impl`, `dtype`: see `conv_impl`,
     `compute_dtype`."""
     k_g, k_d = jax.random.split(key)
-    impl, dtype = conv_impl(cfg.model, impl), compute_dtype(cfg.model, dtype)
+    impl, dtype = conv_impl(cfg, impl), compute_dtype(cfg, dtype)
     return (_build_g(cfg.model, num_rel_joints, num_styles, output_prior_rows(cfg.model, layout), k_g, impl, dtype,
                      generator_bones(cfg.model, layout)),
             _build_d(cfg.model, cfg.data.window_T, num_rel_joints, num_styles, k_d, impl, dtype))
@@ -133,7 +134,7 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None
     `generator_apply` follow them; parameters and optimizer state are float32 either way."""
     num_rel_joints = _num_rel_joints(layout)
     k_g, k_d = jax.random.split(key)
-    kwargs = (("impl", conv_impl(cfg.model, impl)), ("dtype", compute_dtype(cfg.model, dtype)))
+    kwargs = (("impl", conv_impl(cfg, impl)), ("dtype", compute_dtype(cfg, dtype)))
     g_kwargs = kwargs + (("bones", generator_bones(cfg.model, layout)),)
     g_def, g_params = init_split(_build_g, (cfg.model, num_rel_joints, num_styles, output_prior_rows(cfg.model, layout)),
                                  k_g, nnx.Param, build_kwargs=g_kwargs)
@@ -217,17 +218,6 @@ def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax
     return g(curve_vel_BxTx3, w_BxD, phase_offset_B)
 
 
-def make_generate(cfg=None, layout=None, num_styles=None) -> Callable:
-    """`generate(state, curve_vel_BxTx3, labels_B, z_BxZ=None) -> (root_vel, pose)`, jit-able.
-    The arguments are accepted for symmetry with make_train_step; the state carries the model."""
-    del cfg, layout, num_styles
-
-    def generate(state, curve_vel_BxTx3, labels_B, z_BxZ=None):
-        return generator_apply(state, curve_vel_BxTx3, labels_B, z_BxZ)
-
-    return generate
-
-
 # ---------------------------------------------------------------------------------------------
 # Losses as functions of a merged D
 
@@ -284,14 +274,10 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, c
 
 
 def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Array, jax.Array]:
-    """Fake labels ŷ ~ U{0..C-1} and z (N(0, I), or zeros when model.use_z == 'zeros')."""
+    """Fake labels ŷ ~ U{0..C-1} and z ~ N(0, I)."""
     k_label, k_z = jax.random.split(key)
     labels = jax.random.randint(k_label, (batch,), 0, num_styles, dtype=jnp.int32)
-    if cfg.model.use_z == "zeros":
-        z = jnp.zeros((batch, cfg.model.z_dim), jnp.float32)
-    else:
-        z = jax.random.normal(k_z, (batch, cfg.model.z_dim), jnp.float32)
-    return labels, z
+    return labels, jax.random.normal(k_z, (batch, cfg.model.z_dim), jnp.float32)
 
 
 def sample_phase(cfg, batch: int, key) -> jax.Array | None:
@@ -330,8 +316,8 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate) need gait targets")
     if gait is not None and len(gait.stride_m_C) != num_styles:
         raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths for {num_styles} styles")
-    if tcfg.gan_loss not in losses.GAN_LOSSES:
-        raise ValueError(f"train.gan_loss must be one of {losses.GAN_LOSSES}, got {tcfg.gan_loss!r}")
+    if tcfg.gan_loss not in choices(GanLoss):
+        raise ValueError(f"train.gan_loss must be one of {choices(GanLoss)}, got {tcfg.gan_loss!r}")
     _num_rel_joints(layout)
     bone_pairs = tuple((int(a), int(b)) for a, b in layout.bone_pairs)
     bone_lengths = np.asarray(layout.bone_lengths_m, np.float32)
@@ -381,12 +367,12 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
             terms = g_losses(d, *fake_out[:2], fake_labels, curve, bone_pairs, bone_lengths, tcfg,
-                             cfg.model.length_unit, log_stride_B=fake_out[2], gait=gait)
+                             LENGTH_UNIT_M, log_stride_B=fake_out[2], gait=gait)
             if rec_half:
                 h = rec_half
                 terms["g_rec"] = losses.reconstruction_loss(fake_out[0][:h], fake_out[1][:h], real_vel[:h],
                                                             real_pose[:h], batch["phase_valid_BxT"][:h],
-                                                            cfg.model.length_unit)
+                                                            LENGTH_UNIT_M)
                 terms["g_total"] = terms["g_total"] + tcfg.w_g_rec * terms["g_rec"]
             return terms["g_total"], (terms, nnx.state(d, SpectralNormState))
 

@@ -61,11 +61,12 @@ from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 from scipy.spatial.transform import Rotation
 
 from motiongan_jax.bvh import Motion, Skeleton
+from motiongan_jax.representation import CMU_UNIT_M
 
 # Bump whenever generation changes what it writes: it names the cache directory.
 VERSION = "1"
-UNITS_TO_M = 0.056444
-UNITS = "CMU units (1 unit = 0.056444 m), Y up, character faces +Z at zero rotation"
+UNITS_TO_M = CMU_UNIT_M
+UNITS = f"CMU units (1 unit = {CMU_UNIT_M} m), Y up, character faces +Z at zero rotation"
 
 # ----------------------------------------------------------------------------------------------
 # Skeleton

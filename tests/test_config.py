@@ -7,12 +7,12 @@ from motiongan_jax.config import ConfigError, config_hash, load_config, override
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
-@pytest.mark.parametrize("name", ["cpu", "tiny"])
+@pytest.mark.parametrize("name", ["small", "tiny"])
 def test_embedded_data_configs_load(name):
     assert load_config(CONFIGS / f"{name}.py").name == name
 
 
-@pytest.mark.parametrize("name", ["paper", "bandai", "bandai_cpu"])
+@pytest.mark.parametrize("name", ["paper", "bandai", "bandai_small"])
 def test_real_data_configs_need_a_data_dir(name):
     with pytest.raises(ConfigError, match=r"data\.data_dir"):
         load_config(CONFIGS / f"{name}.py")
@@ -38,9 +38,11 @@ def test_override_types_and_errors():
     assert cfg2.train.batch_size == 8 and cfg2.train.lr_g == 0.001 and cfg2.data.rotate is False
     assert cfg2.data.fps_factors == (1.0,) and cfg2.name == "x"
     assert override(cfg, ["data.fps_factors=1.5"]).data.fps_factors == (1.5,)
-    # "none" is a value of string options, and None only for fields that may be None
-    assert override(cfg, ["model.d_cond=none"]).model.d_cond == "none"
-    assert override(cfg, ["model.output_prior=none"]).model.output_prior == "none"
+    # booleans from true/false; "none" is None only for fields that may be None
+    assert override(cfg, ["model.d_cond=true"]).model.d_cond is True
+    assert override(cfg, ["compute.conv_impl=xla"]).compute.conv_impl == "xla"
+    with pytest.raises(ConfigError, match="model.output_prior"):
+        override(cfg, ["model.output_prior=none"])
     assert override(cfg, ["data.data_dir=/x", "data.data_dir=none"]).data.data_dir is None
     assert config_hash(cfg) != config_hash(cfg2)
     assert config_hash(cfg) == config_hash(load_config(CONFIGS / "tiny.py"))
@@ -58,9 +60,10 @@ def test_override_types_and_errors():
     ("data.data_dir=/no/such/dir", "data.data_dir"),
     ("model.kw=4", "model.kw"),
     ("train.curve_points=3", "train.curve_points"),
-    ("model.conv_impl=cudnn", "model.conv_impl"),
-    ("model.compute_dtype=float16", "model.compute_dtype"),
-    ("model.d_cond=concat", "model.d_cond"),
+    ("compute.conv_impl=cudnn", "compute.conv_impl"),
+    ("compute.compute_dtype=float16", "compute.compute_dtype"),
+    ("model.g_frame=body", "model.g_frame"),
+    ("model.d_cond=projection", "model.d_cond"),
     ("model.gait_phase=1", "model.gait_phase"),
     ("train.w_g_skate=-1.0", "train.w_g_skate"),
     ("train.w_g_stride=1.0", "train.w_g_stride"),  # needs model.gait_phase
@@ -83,3 +86,65 @@ def test_saved_configs_with_a_retired_option_off_still_load():
     d["model"]["phase_wavelengths_m"] = [1.2]
     with pytest.raises(ConfigError, match="model.phase_wavelengths_m.*no longer exists"):
         from_dict(d)
+
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+
+
+def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_documented():
+    from motiongan_jax import config as C
+
+    for name, make in C.PRESETS.items():
+        assert load_config(CONFIGS / f"{name}.py", check=False) == make() == C.preset(name)
+        assert make().name == name
+    paper, small = C.paper().model, C.small().model
+    # the small model turns every model option on; the paper's keeps every default
+    assert paper == C.ModelConfig(top=64, kw=5, w_dim=64, z_dim=64)
+    assert (small.output_prior, small.d_cond, small.exact_bones, small.gait_phase, small.root_height,
+            small.g_frame, small.latent_init) == (True, True, True, True, True, "curve", "torch_default")
+    assert C.bandai_small().model == small and C.bandai_small().data.frame_nums == 64
+    with pytest.raises(ConfigError, match="unknown preset 'cpu'"):
+        C.preset("cpu")
+
+
+def test_each_option_lists_its_values_once_and_validate_reads_them():
+    from motiongan_jax import config as C
+
+    assert C.choices(C.GFrame) == ("world", "curve")
+    for field, literal in (("model.g_frame", C.GFrame), ("model.latent_init", C.LatentInit),
+                           ("train.gan_loss", C.GanLoss), ("compute.conv_impl", C.ConvImpl),
+                           ("compute.compute_dtype", C.ComputeDtype), ("data.label_rule", C.LabelRule)):
+        for value in C.choices(literal):  # every listed value validates ...
+            validate(override(C.tiny(), [f"{field}={value}"]), need_data=False)
+        with pytest.raises(ConfigError, match=field.replace(".", r"\.") + ".*not one of"):
+            validate(override(C.tiny(), [f"{field}=bogus"]))  # ... and nothing else
+
+
+def test_a_run_config_written_before_the_compute_section_loads_as_the_small_preset():
+    """tests/fixtures/run_config_cpu_before_presets.json: the config.json of `bin/train.py --config
+    configs/cpu.py --steps 300` written by the code before the compute section, the booleans
+    and the rename of cpu to small (with use_z, d_frame and length_unit still in it)."""
+    import json
+
+    from motiongan_jax import checkpoint, config as C
+
+    meta = json.loads((FIXTURES / "run_config_cpu_before_presets.json").read_text())
+    old = meta["config"]
+    assert old["name"] == "cpu" and old["model"]["d_cond"] == "projection" and "conv_impl" in old["model"]
+    cfg = C.from_dict(old)
+    assert cfg == override(C.small(), ["train.num_steps=300"])
+    assert C.to_dict(C.from_dict(C.to_dict(cfg))) == C.to_dict(cfg)  # the new schema round-trips
+    # the saved hash is the old dict's; the same config in the new schema hashes differently
+    assert meta["config_hash"] == config_hash(old) != config_hash(cfg)
+    # a run of the same config resumes from it: the model sections agree whole
+    checkpoint.check_compatible(meta, {"model": C.to_dict(cfg)["model"], "window_T": cfg.data.window_T}, "here")
+    with pytest.raises(checkpoint.CheckpointError, match="its model is"):
+        checkpoint.check_compatible(meta, {"model": C.to_dict(override(cfg, ["model.d_cond=false"]))["model"]},
+                                    "here")
+    # a saved config that used a retired option, or an old value with no boolean, is refused
+    for section, name, value in (("model", "d_frame", "window"), ("model", "use_z", "zeros"),
+                                 ("model", "length_unit", 1.0), ("model", "output_prior", "bogus")):
+        bad = json.loads(json.dumps(old))
+        bad[section][name] = value
+        with pytest.raises(ConfigError, match=f"{section}.{name}"):
+            C.from_dict(bad)

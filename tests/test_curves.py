@@ -428,3 +428,18 @@ def test_missing_file_and_root_positions(tmp_path):
     np.testing.assert_array_equal(curves.curve_from_root_positions(root), root[:, [0, 2]])
     with pytest.raises(DegenerateCurveError, match="zero length"):
         curves.curve_from_root_positions(np.zeros((5, 3)))
+
+
+def test_window_frame_turns_the_travel_to_plus_z_and_ignores_the_first_velocity():
+    """By hand: travel along +x (heading pi/2) is turned to +z, and a pose row along +x with it;
+    v[0] (a copy of v[1] in `velocity`) does not enter the heading; a still window is unturned."""
+    from motiongan_jax.curves import window_frame
+
+    T = 8
+    v_x = jnp.zeros((1, T, 3)).at[..., 0].set(0.1).at[0, 0].set(jnp.array([0.0, 0.0, -5.0]))
+    v_c, p_c = window_frame(v_x, jnp.tile(jnp.array([1.0, 2.0, 0.0]), (1, T, 1)))
+    chex.assert_shape((v_c, p_c), (1, T, 3))
+    np.testing.assert_allclose(np.asarray(v_c[0, 3]), [0, 0, 0.1], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(p_c[0, 3]), [0, 2, 1], atol=1e-6)
+    still_v, still_p = window_frame(jnp.zeros((1, T, 3)), jnp.ones((1, T, 3)))
+    np.testing.assert_array_equal(np.asarray(still_p), np.ones((1, T, 3)))

@@ -309,7 +309,7 @@ def gait_model(repo):
     from flax import nnx
 
     cfg = override(load_config(repo / "configs" / "tiny.py"),
-                   ["model.output_prior=rest_and_curve", "model.g_frame=curve", "model.gait_phase=true",
+                   ["model.output_prior=true", "model.g_frame=curve", "model.gait_phase=true",
                     "model.root_height=true"])
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     state = step_lib.init_state(cfg, layout, len(NAMES), jax.random.key(0))

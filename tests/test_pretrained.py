@@ -189,13 +189,15 @@ def shipped():
     return pretrained.read_export(pretrained.SHIPPED_MODEL)
 
 
-def test_shipped_model_matches_its_checksum_and_generates_finite_walks(shipped):
+def test_shipped_model_matches_its_checksum_and_generates_finite_walks(repo, shipped):
     assert pretrained.SHIPPED_MODEL.stat().st_size < 8e6
     z = _entries(pretrained.SHIPPED_MODEL)
     assert _sha256(z, [n for n in z if n != "sha256"]) == shipped.sha256 == str(z["sha256"])
     assert _sha256(z, [n for n in z if n.startswith("g/")]) == shipped.params_sha256
     p = shipped.provenance
-    assert p["config_hash"] == config_hash(from_dict(shipped.meta["config"]))
+    # provenance: the config as trained (before cpu was renamed small); it loads as the small preset
+    assert p["config_hash"] == config_hash(shipped.meta["config"]) and p["config_name"] == "cpu"
+    assert from_dict(shipped.meta["config"]) == override(load_config(repo / "configs" / "small.py"), ["train.seed=0"])
     assert p["params"] == "ema" and p["steps"] > 0 and shipped.meta["data_dir"] is None
     state, meta, cfg, layout = pretrained.state_from_export(shipped)
     names = list(meta["style_names"])

@@ -189,16 +189,17 @@ def test_incompatible_checkpoint_is_refused(unbroken, tiny, tmp_path):
 
 
 def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
-    # conv_impl and compute_dtype choose how the same parameters are computed: a run trained with
-    # one may resume or be evaluated with the other; an architecture field still refuses
+    # the compute section chooses how the same parameters are computed: a run trained with one
+    # may resume or be evaluated with the other; an architecture field still refuses
     meta = {"model": to_dict(tiny)["model"], "window_T": tiny.data.window_T}
-    other = override(tiny, ["model.conv_impl=xla", "model.compute_dtype=bfloat16"])
+    other = override(tiny, ["compute.conv_impl=xla", "compute.compute_dtype=bfloat16"])
+    assert other.model == tiny.model
     checkpoint.check_compatible(meta, {"model": to_dict(other)["model"]}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
         checkpoint.check_compatible(meta, {"model": to_dict(override(tiny, ["model.top=8"]))["model"]}, "here")
     # a checkpoint from before the frame and bone options: those fields are absent from its meta
     # and mean their defaults; a run with another value is refused
-    older = {k: v for k, v in meta["model"].items() if k not in ("g_frame", "d_frame", "exact_bones")}
+    older = {k: v for k, v in meta["model"].items() if k not in ("g_frame", "exact_bones")}
     checkpoint.check_compatible({"model": older}, {"model": to_dict(tiny)["model"]}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
         checkpoint.check_compatible({"model": older}, {"model": to_dict(override(tiny, ["model.g_frame=curve"]))["model"]},

@@ -137,13 +137,13 @@ def load_engine(workdir=None, model=None, step=None, params="ema") -> engine_lib
 
     state, meta, cfg, layout = pretrained.load_model(workdir, step, params, model)
     if workdir is not None:
-        title = f"run {Path(workdir).name} · {meta['config'].get('name', '')} config · step {int(state.step)}"
+        title = f"run {Path(workdir).name} · {cfg.name} config · step {int(state.step)}"
         details = f"{Path(workdir).resolve()}, {params} parameters, config {meta.get('config_hash', '?')}"
     else:
         export = pretrained.read_export(pretrained.SHIPPED_MODEL if model is None else model)
         p = export.provenance
         title = (("shipped model" if model is None else export.path.name)
-                 + f" · {p['config_name']} config · {p['steps']} steps · seed {p['seed']}")
+                 + f" · {cfg.name} config · {p['steps']} steps · seed {p['seed']}")
         details = export.describe()
     return engine_lib.Engine(state, meta, cfg, layout, title, details)
 

@@ -32,7 +32,8 @@ import functools
 import jax
 import jax.numpy as jnp
 
-IMPLS = ("fast", "xla")
+from motiongan_jax.config import ConvImpl, choices
+
 _DIMS = ("NHWC", "HWIO", "NHWC")
 # Window-matrix bytes per scan chunk of the weight gradient: big enough for efficient matrix
 # products, small enough not to pay page faults on gigabytes of fresh memory every step.
@@ -224,7 +225,7 @@ _fast_conv.defvjp(_fast_conv_fwd, _fast_conv_bwd)
 
 
 def conv2d(x_BxTxWxC: jax.Array, kernel: jax.Array, stride: tuple[int, int] = (1, 1),
-           padding: Padding = ((0, 0), (0, 0)), *, impl: str = "fast") -> jax.Array:
+           padding: Padding = ((0, 0), (0, 0)), *, impl: ConvImpl = "fast") -> jax.Array:
     """Cross-correlation of an NHWC input with an HWIO kernel, zero `padding` ((t0, t1), (w0, w1)),
     no bias: `lax.conv_general_dilated` semantics. impl "fast" (see the module doc) or "xla"."""
     stride = (int(stride[0]), int(stride[1]))
@@ -232,5 +233,5 @@ def conv2d(x_BxTxWxC: jax.Array, kernel: jax.Array, stride: tuple[int, int] = (1
     if impl == "xla":
         return _xla_conv(x_BxTxWxC, kernel, stride, padding)
     if impl != "fast":
-        raise ValueError(f"conv impl must be one of {IMPLS}, got {impl!r}")
+        raise ValueError(f"conv impl must be one of {choices(ConvImpl)}, got {impl!r}")
     return _fast_conv(x_BxTxWxC, kernel, stride, padding)

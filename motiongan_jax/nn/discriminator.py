@@ -20,13 +20,7 @@ strides keep the paper's grouping of joints; the parameter count does not depend
 Spectral norm: each call with `update_stats=True` runs one power iteration per layer and stores
 u, v (the reference calls D three times per training iteration, in train mode).
 
-Window frame (model.d_frame = "window", small configs only; "world" is the paper's D): before
-the first layer, root velocity and pose are turned about +y so that the window's travel (the sum
-of its root velocities) points along +z (`curves.window_frame`, the evaluator's canonical frame
-too). D's verdicts are then the same for every rotation of a window, so it need not learn each
-direction the rotation augmentation draws. Same parameters.
-
-Projection (model.d_cond = "projection", small configs; "none" is the paper's D): the real/fake
+Projection (`projection=True`, model.d_cond, small configs; off in the paper's D): the real/fake
 logit gains <V[y], flat>, V a spectral-norm linear map from the flattened features to one row per
 style (Miyato & Koyama 2018), y the window's label: the real label for real windows, the
 requested one for fakes. The class head still classifies; the verdict now asks "a real walk of
@@ -45,12 +39,9 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from motiongan_jax import curves
 from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, uniform_init, zeros_init
 
 PADDED_ROWS = 81
-FRAMES = ("world", "window")
-CONDS = ("none", "projection")
 
 
 def flatten_channel_major(x_BxTx1xC: jax.Array) -> jax.Array:
@@ -70,16 +61,10 @@ class Discriminator(nnx.Module):
         length_unit: float = 1.0,
         impl: str = "fast",
         compute_dtype: str = "float32",
-        frame: str = "world",
-        cond: str = "none",
+        projection: bool = False,
         rngs: nnx.Rngs,
     ):
-        if frame not in FRAMES:
-            raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
-        if cond not in CONDS:
-            raise ValueError(f"cond must be one of {CONDS}, got {cond!r}")
-        self.frame = frame
-        self.cond = cond
+        self.projection = bool(projection)
         if not 1 <= num_rel_joints <= PADDED_ROWS // 3:
             raise ValueError(f"num_rel_joints must be in 1..{PADDED_ROWS // 3}, got {num_rel_joints}")
         if seq_len % 16:
@@ -109,7 +94,7 @@ class Discriminator(nnx.Module):
         self.l_cls = sn_linear(num_styles)
         # a zero bias: the verdict starts without a per-style offset (it may learn one)
         self.l_proj = (Dense(feat, num_styles, kernel_init=normal_init(0.02), bias_init=zeros_init,
-                             spectral_norm=True, rngs=rngs) if cond == "projection" else None)
+                             spectral_norm=True, rngs=rngs) if self.projection else None)
 
     def _input(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
         b, t, r = pose_BxTxR.shape
@@ -125,8 +110,6 @@ class Discriminator(nnx.Module):
         """Activations after c1_0 and its LeakyReLU, B x T/4 x 9 x 2top (style search)."""
         # inputs in metres; the layers work in length_unit, like the generator
         with jax.named_scope("D"):
-            if self.frame == "window":
-                root_vel_BxTx3, pose_BxTxR = curves.window_frame(root_vel_BxTx3, pose_BxTxR)
             x = self._input(root_vel_BxTx3 / self.length_unit, pose_BxTxR / self.length_unit)
             x = x.astype(self.compute_dtype)
             x = leaky_relu(self.c0_0(x, update_stats=update_stats))
@@ -137,8 +120,8 @@ class Discriminator(nnx.Module):
         """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business.
         `labels_B` (int): the style each window is judged as; required by a projection D, ignored
         by the paper's."""
-        if self.cond == "projection" and labels_B is None:
-            raise ValueError("a projection D (model.d_cond = 'projection') needs labels_B")
+        if self.projection and labels_B is None:
+            raise ValueError("a projection D (model.d_cond) needs labels_B")
         x = self.features(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
         with jax.named_scope("D"):
             x = leaky_relu(self.c2_0(x, update_stats=update_stats))

@@ -32,7 +32,7 @@ identity and the network is the paper's. J > 27 would need another width stage: 
 Options of the small configs (the paper's G has none of them; docs/RESULTS.md §5-§10 says
 why each was added and what it changed). None adds parameters except the stride head.
 
-* Output prior (model.output_prior = "rest_and_curve"): the pose head adds the skeleton's rest
+* Output prior (model.output_prior): the pose head adds the skeleton's rest
   pose (`rest_pose_R`, metres) and the root head the input curve velocity, so G starts as a rest
   pose gliding along the curve instead of a collapsed body standing still.
 * Curve frame (model.g_frame = "curve"): G works in the walker's frame. Its input is each curve
@@ -76,11 +76,11 @@ import jax.numpy as jnp
 from flax import nnx
 
 from motiongan_jax import curves
+from motiongan_jax.config import GFrame, LatentInit, choices
 from motiongan_jax.nn.latent import LatentTransform
 from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, Dense, leaky_relu, upsample_time2, zeros_init
 
 MAX_JOINTS = 27
-FRAMES = ("world", "curve")
 
 
 def project_bones(pose_BxTxR: jax.Array, bones) -> jax.Array:
@@ -153,11 +153,11 @@ class Generator(nnx.Module):
         w_dim: int = 64,
         z_dim: int = 64,
         num_styles: int,
-        latent_init: str = "paper",
+        latent_init: LatentInit = "paper",
         length_unit: float = 1.0,
         rest_pose_R: tuple[float, ...] | None = None,
         residual_root: bool = False,
-        frame: str = "world",
+        frame: GFrame = "world",
         bones: tuple[tuple[int, int, float], ...] | None = None,
         gait_phase: bool = False,
         root_height: bool = False,
@@ -183,8 +183,8 @@ class Generator(nnx.Module):
         # a tuple of floats: static (part of the graph definition), not a parameter
         self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
         self.residual_root = bool(residual_root)
-        if frame not in FRAMES:
-            raise ValueError(f"frame must be one of {FRAMES}, got {frame!r}")
+        if frame not in choices(GFrame):
+            raise ValueError(f"frame must be one of {choices(GFrame)}, got {frame!r}")
         self.frame = frame
         if bones is not None:
             bones = tuple((int(a), int(b), float(length)) for a, b, length in bones)

@@ -20,17 +20,17 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
+from motiongan_jax.config import LatentInit, choices
 from motiongan_jax.nn.layers import Dense, leaky_relu, normal_init, pixel_norm, torch_default_dense, zeros_init
 
 NUM_LAYERS = 5
-INITS = ("paper", "torch_default")
 
 
 class LatentTransform(nnx.Module):
-    def __init__(self, num_styles: int, *, z_dim: int = 64, w_dim: int = 64, init: str = "paper",
+    def __init__(self, num_styles: int, *, z_dim: int = 64, w_dim: int = 64, init: LatentInit = "paper",
                  rngs: nnx.Rngs):
-        if init not in INITS:
-            raise ValueError(f"latent init must be one of {INITS}, got {init!r}")
+        if init not in choices(LatentInit):
+            raise ValueError(f"latent init must be one of {choices(LatentInit)}, got {init!r}")
         self.num_styles = num_styles
         self.z_dim = z_dim
         # The embedding width equals z_dim: the reference reshapes it to z's shape.
