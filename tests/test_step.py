@@ -12,12 +12,11 @@ import numpy as np
 import pytest
 from flax import nnx
 
+from conftest import FAST
 from motiongan_jax import step as step_lib
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 
-# Compile time dominates on CPU; the optimiser level does not change what is computed.
-FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
 J, T, B, C = 27, 16, 2, 4
 METRICS = ("d_adv", "d_cls", "d_total", "g_adv", "g_cls", "g_curve", "g_bone", "g_total",
