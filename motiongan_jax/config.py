@@ -119,7 +119,7 @@ class ModelConfig:
     # How G and D compute their convolutions: "fast" (nn/conv.py: skip and polyphase rewrites,
     # matrix-product weight gradients; the faster form on CPU) or "xla" (the straightforward
     # lax.conv form). Same parameters and checkpoints, same function up to float rounding
-    # (tests/test_speed.py); see docs/PERFORMANCE.md.
+    # (tests/test_fast_equals_reference.py); see docs/PERFORMANCE.md.
     conv_impl: str = "fast"
     # Activation dtype of G and D: "float32" or "bfloat16" (mixed precision, meant for GPUs:
     # parameters, optimizer state, normalisation statistics and losses stay float32).
