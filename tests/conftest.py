@@ -34,6 +34,15 @@ def compiled(fn, *args):
     return jax.jit(fn).lower(*args).compile(compiler_options=FAST)
 
 
+def compiled_call(module, *args, **kwargs):
+    """module(*args, **kwargs) for an nnx module, as one program compiled with FAST (run op by
+    op, G and D compile each of their hundreds of ops on its own)."""
+    from flax import nnx
+
+    graphdef, state = nnx.split(module)
+    return compiled(lambda state, *a: nnx.merge(graphdef, state)(*a, **kwargs), state, *args)(state, *args)
+
+
 def load_cli(name: str):
     """bin/NAME.py as a module (its `main(argv)` returns the exit status)."""
     spec = importlib.util.spec_from_file_location(f"_{name}_cli", REPO / "bin" / f"{name}.py")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from flax import nnx
 
-from conftest import compiled
+from conftest import compiled, compiled_call
 from motiongan_jax.nn import (Discriminator, Generator, SpectralNormState, count_params,
                               init_split)
 from motiongan_jax.nn import layers
@@ -332,13 +332,6 @@ def test_latent_init_sets_the_scale_of_w():
         LatentTransform(3, z_dim=16, w_dim=16, init="bogus", rngs=nnx.Rngs(0))
 
 
-def _compiled_call(module, *args, **kwargs):
-    """module(*args, **kwargs) as one compiled program (run op by op, G and D compile each of
-    their hundreds of ops separately)."""
-    graphdef, state = nnx.split(module)
-    return compiled(lambda state, *a: nnx.merge(graphdef, state)(*a, **kwargs), state, *args)(state, *args)
-
-
 def test_networks_take_metres_and_work_in_their_length_unit():
     """G(length_unit=u) on metres equals G(length_unit=1) on lengths in u, scaled back by u."""
     u = 0.056444
@@ -346,13 +339,13 @@ def test_networks_take_metres_and_work_in_their_length_unit():
     gu = Generator(27, top=4, w_dim=8, z_dim=8, num_styles=3, length_unit=u, rngs=nnx.Rngs(0))
     vel = 0.05 * jax.random.normal(jax.random.key(2), (2, 16, 3))
     w = g1.style(jnp.array([0, 1]), jnp.zeros((2, 8)))
-    r1, p1 = _compiled_call(g1, vel / u, w)
-    ru, pu = _compiled_call(gu, vel, w)
+    r1, p1 = compiled_call(g1, vel / u, w)
+    ru, pu = compiled_call(gu, vel, w)
     np.testing.assert_allclose(ru, r1 * u, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(pu, p1 * u, rtol=1e-5, atol=1e-9)
     d1 = Discriminator(27, num_styles=3, seq_len=16, top=4, rngs=nnx.Rngs(1))
     du = Discriminator(27, num_styles=3, seq_len=16, top=4, length_unit=u, rngs=nnx.Rngs(1))
-    a1, c1 = _compiled_call(d1, r1, p1, update_stats=False)
-    au, cu = _compiled_call(du, ru, pu, update_stats=False)
+    a1, c1 = compiled_call(d1, r1, p1, update_stats=False)
+    au, cu = compiled_call(du, ru, pu, update_stats=False)
     np.testing.assert_allclose(au, a1, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(cu, c1, rtol=1e-4, atol=1e-6)
