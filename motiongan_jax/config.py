@@ -112,7 +112,7 @@ class ComputeConfig:
     """How the same parameters are computed: a run may resume or be evaluated with other values
     (checkpoints compare the model section only)."""
     # "fast" (nn/conv.py's rewrites, the faster form on CPU) or "xla" (the plain lax.conv form);
-    # same function up to float rounding (docs/PERFORMANCE.md).
+    # same function up to float rounding (tests/test_fast_equals_reference.py, docs/PERFORMANCE.md).
     conv_impl: ConvImpl = "fast"
     # Activation dtype of G and D; "bfloat16" is mixed precision for GPUs (parameters, optimizer
     # state, normalisation statistics and losses stay float32).

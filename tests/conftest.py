@@ -1,17 +1,185 @@
-"""Shared pytest fixtures."""
+"""Shared pytest fixtures and helpers (docs/TESTING.md).
+
+The expensive artifacts (the tiny config trained for its 4 steps, a checkpoint with seeded random
+parameters) are built once per test run, not once per xdist worker: `_build_once` makes each under
+a file lock in a folder every worker sees, in a temporary directory renamed into place when
+complete, so no test ever reads a half-built one. Tests only read them (checked at the end).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import importlib.util
+import io
 import os
+import shutil
+import tempfile
+import types
 from pathlib import Path
 
 import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+# Compile time dominates on CPU; the backend optimiser level changes how fast the program runs,
+# not what it computes.
+FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+
+def compiled(fn, *args):
+    """`fn` jitted and compiled for `args` with the FAST options."""
+    import jax
+
+    return jax.jit(fn).lower(*args).compile(compiler_options=FAST)
+
+
+def compiled_call(module, *args, **kwargs):
+    """module(*args, **kwargs) for an nnx module, as one program compiled with FAST (run op by
+    op, G and D compile each of their hundreds of ops on its own)."""
+    from flax import nnx
+
+    graphdef, state = nnx.split(module)
+    return compiled(lambda state, *a: nnx.merge(graphdef, state)(*a, **kwargs), state, *args)(state, *args)
+
+
+def load_cli(name: str):
+    """bin/NAME.py as a module (its `main(argv)` returns the exit status)."""
+    spec = importlib.util.spec_from_file_location(f"_{name}_cli", REPO / "bin" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_cli(name: str, argv) -> tuple[int, str, str]:
+    """(exit status, stdout, stderr) of bin/NAME.py's main(argv), in this process; a SystemExit
+    (argparse's usage errors) counts as its exit status."""
+    main = load_cli(name).main
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+    return code, out.getvalue(), err.getvalue()
+
+
+STATE_FIELDS = ("g_params", "d_params", "d_sn_state", "opt_g_state", "opt_d_state", "g_ema_params")
+
+
+def assert_bit_identical(a, b, fields=STATE_FIELDS):
+    """Every leaf of the named TrainState fields of `a` and `b` is equal, bit for bit."""
+    import jax
+    import numpy as np
+
+    la = jax.tree.leaves(tuple(getattr(a, f) for f in fields))
+    lb = jax.tree.leaves(tuple(getattr(b, f) for f in fields))
+    assert len(la) == len(lb)
+    for x, y in zip(la, lb):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def random_run(cfg, wd, step: int = 4, seed: int = 0, data_dir: str = "<test>"):
+    """A checkpoint of `cfg` with seeded random parameters, saved as training saves one
+    (jax.eval_shape of init_state gives the structure without compiling the initialisers)."""
+    import jax
+    import numpy as np
+
+    from motiongan_jax import checkpoint, representation, synthetic
+    from motiongan_jax import step as step_lib
+    from motiongan_jax import train as train_lib
+
+    layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
+    styles = tuple(sorted(synthetic.STYLES))
+    dataset = types.SimpleNamespace(style_names=styles, layout=layout, fps=60.0, data_dir=data_dir)
+    like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(styles), jax.random.key(0)))
+    rng = np.random.default_rng(seed)
+    state = jax.tree.map(lambda s: rng.normal(0, 0.3, s.shape).astype(s.dtype)
+                         if np.issubdtype(s.dtype, np.floating) else np.zeros(s.shape, s.dtype), like)
+    checkpoint.save(checkpoint.manager(Path(wd) / "checkpoints"), step, state, train_lib.run_meta(cfg, dataset))
+    return Path(wd)
+
+
+# ---------------------------------------------------------------------------------------------
+# artifacts shared by every worker
+
+
+def _shared_root(tmp_path_factory) -> Path:
+    """This run's base temporary folder: under xdist the parent of every worker's own."""
+    root = tmp_path_factory.getbasetemp()
+    return root.parent if root.name.startswith("popen-gw") else root
+
+
+def _listing(path: Path) -> list:
+    return sorted((str(p.relative_to(path)), p.stat().st_size, p.stat().st_mtime_ns) for p in path.rglob("*"))
+
+
+def _build_once(tmp_path_factory, name: str, build) -> Path:
+    """ROOT/NAME, made by `build(tmp_dir)` in the first worker to get here (the others wait on the
+    lock) and renamed into place only once complete; a failed build leaves nothing."""
+    root = _shared_root(tmp_path_factory)
+    final = root / name
+    with open(root / f".{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not final.is_dir():
+            tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".{name}."))
+            try:
+                build(tmp)
+                os.rename(tmp, final)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+    return final
+
+
+@contextlib.contextmanager
+def _read_only(path: Path):
+    """Yields `path` and fails the run at its end if any test changed a file there."""
+    before = _listing(path)
+    yield path
+    assert _listing(path) == before, f"a test wrote into the shared {path.name}: copy it first"
+
+
+@pytest.fixture(scope="session")
+def tiny_cfg():
+    from motiongan_jax.config import load_config
+
+    return load_config(REPO / "configs" / "tiny.py")
+
+
+@pytest.fixture(scope="session")
+def trained_tiny(tiny_cfg, tmp_path_factory):
+    """The tiny config trained for its 4 steps without interruption (seed 0): the reference of the
+    training tests and the model of the analysis tests. Read only."""
+    from motiongan_jax import train as train_lib
+
+    path = _build_once(tmp_path_factory, "trained_tiny",
+                       lambda wd: train_lib.train(tiny_cfg, wd, progress=False, log=lambda s: None))
+    with _read_only(path):
+        yield path
+
+
+@pytest.fixture(scope="session")
+def random_tiny(tiny_cfg, tmp_path_factory):
+    """The tiny config's G and D with seeded random parameters, as a checkpoint at step 4 of a run
+    on the embedded dataset: checkpoints/ alone (what generation reads). Read only."""
+    from motiongan_jax import data
+
+    def build(wd):
+        random_run(tiny_cfg, wd, data_dir=str(data.resolve_data_dir(tiny_cfg.data)))
+
+    path = _build_once(tmp_path_factory, "random_tiny", build)
+    with _read_only(path):
+        yield path
+
+
+# ---------------------------------------------------------------------------------------------
+# the environment of every test
 
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """The shared motion data folder (../shared/data beside the checkout, or $MOTIONGAN_SHARED_DATA)."""
-    default = Path(__file__).resolve().parents[2] / "shared" / "data"
+    default = REPO.parent / "shared" / "data"
     path = Path(os.environ.get("MOTIONGAN_SHARED_DATA", default))
     if not path.is_dir():
         pytest.skip(f"shared data not found at {path}: set MOTIONGAN_SHARED_DATA")
@@ -20,9 +188,13 @@ def shared_data() -> Path:
 
 @pytest.fixture(scope="session", autouse=True)
 def _private_cache(tmp_path_factory):
-    """Tests never read or write the user's cache (the embedded dataset, preprocessed clips)."""
+    """Tests never read or write the user's cache (the embedded dataset, preprocessed clips). The
+    workers share one (its writes are atomic and race-safe), so the embedded dataset is generated
+    once and every run made on it names the same data folder."""
     old = os.environ.get("MOTIONGAN_CACHE")
-    os.environ["MOTIONGAN_CACHE"] = str(tmp_path_factory.mktemp("motiongan_cache"))
+    path = _shared_root(tmp_path_factory) / "motiongan_cache"
+    path.mkdir(exist_ok=True)
+    os.environ["MOTIONGAN_CACHE"] = str(path)
     yield
     if old is None:
         os.environ.pop("MOTIONGAN_CACHE", None)
@@ -38,9 +210,7 @@ def _compilation_cache(tmp_path_factory):
     cover the program, the options and the versions, so a hit computes exactly what a compile would."""
     import jax
 
-    root = tmp_path_factory.getbasetemp()
-    shared = root.parent if root.name.startswith("popen-gw") else root  # the same folder for every worker
-    path = shared / "jax_compilation_cache"
+    path = _shared_root(tmp_path_factory) / "jax_compilation_cache"
     path.mkdir(exist_ok=True)
     old = os.environ.get("JAX_COMPILATION_CACHE_DIR")
     old_config = jax.config.jax_compilation_cache_dir
@@ -56,4 +226,5 @@ def _compilation_cache(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def repo() -> Path:
-    return Path(__file__).resolve().parents[1]
+    return REPO
+

@@ -1,6 +1,5 @@
 """Style-space analysis and style search (motiongan_jax/analysis.py, bin/analyze.py)."""
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -10,20 +9,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import load_cli
 from motiongan_jax import analysis as A
 from motiongan_jax import bvh, checkpoint, curves, kinematics, representation, synthetic
 from motiongan_jax import generate as gen
 
 
 @pytest.fixture(scope="module")
-def run(repo, tmp_path_factory):
-    """The tiny config trained for its 4 steps: (workdir, state, meta, cfg, layout)."""
-    from motiongan_jax.config import load_config
-    from motiongan_jax.train import train
-
-    wd = tmp_path_factory.mktemp("tiny_run")
-    train(load_config(repo / "configs" / "tiny.py"), wd, progress=False, log=lambda s: None)
-    return (wd, *checkpoint.load_run(wd))
+def run(trained_tiny):
+    """The tiny config trained for its 4 steps (conftest): (workdir, state, meta, cfg, layout)."""
+    return (trained_tiny, *checkpoint.load_run(trained_tiny))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -235,10 +230,7 @@ def test_style_search_recovers_a_known_w(run):
 
 
 def _cli(repo):
-    spec = importlib.util.spec_from_file_location("analyze_cli", repo / "bin" / "analyze.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_cli("analyze")
 
 
 def test_cli_writes_every_file(run, repo, tmp_path, capsys):

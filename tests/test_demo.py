@@ -1,6 +1,6 @@
 """The demo's JSON API and request checks (motiongan_jax/demo), through Flask's test client.
 
-The model is the tiny config with seeded random parameters (random_model): the API's job is to
+The model is the tiny config with seeded random parameters (conftest's random_tiny): the API's job is to
 check requests and pass them through generate.py unchanged, which a random G shows as well as a
 trained one, and it compiles in a fraction of the time. The page itself: test_demo_browser.py.
 """
@@ -20,18 +20,16 @@ pytest.importorskip("flask")
 
 from motiongan_jax import bvh, checkpoint, curves  # noqa: E402
 from motiongan_jax import generate as gen  # noqa: E402
-from motiongan_jax.config import load_config  # noqa: E402
 from motiongan_jax.demo import engine as E  # noqa: E402
 from motiongan_jax.demo import server  # noqa: E402
-from random_model import random_run  # noqa: E402
 
 RATE = 15.0
 SPEED = 1.2
 
 
 @pytest.fixture(scope="module")
-def model(repo, tmp_path_factory):
-    return checkpoint.load_run(random_run(load_config(repo / "configs" / "tiny.py"), tmp_path_factory.mktemp("demo_run")))
+def model(random_tiny):
+    return checkpoint.load_run(random_tiny)
 
 
 @pytest.fixture(scope="module")

@@ -1,14 +1,13 @@
 """The style evaluator and the evaluation driver (bin/train_evaluator.py, bin/evaluate.py).
 
 Unit tests use hand-made windows with known answers; the CLI tests run the whole protocol on
-the tiny config (a checkpoint with seeded random parameters, as in tests/test_generate.py, and
+the tiny config (conftest's checkpoint with seeded random parameters, as in tests/test_generate.py, and
 an evaluator trained for a few steps) and check the report's structure and the real-data row,
 whose values are known: real motion on its own curve has bone error ~0 and path ratio ~1.
 """
 
-import importlib.util
 import json
-import types
+import shutil
 
 import chex
 import jax
@@ -16,10 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from conftest import load_cli
 from motiongan_jax import checkpoint, curves, evaluation, evaluator, representation, synthetic
-from motiongan_jax import step as step_lib
-from motiongan_jax import train as train_lib
-from motiongan_jax.config import load_config
 
 # ---------------------------------------------------------------------------------------------
 # canonicalisation
@@ -147,29 +144,17 @@ def test_heading_change_and_shape_curves():
 
 
 def _load_cli(repo, name):
-    spec = importlib.util.spec_from_file_location(f"_{name}_cli", repo / "bin" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main
+    return load_cli(name).main
 
 
 @pytest.fixture(scope="module")
-def tiny_run(repo, tmp_path_factory):
-    cfg = load_config(repo / "configs" / "tiny.py")
-    layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    styles = tuple(sorted(synthetic.STYLES))
-    from motiongan_jax import data
-
-    dataset = types.SimpleNamespace(style_names=styles, layout=layout, fps=60.0,
-                                    data_dir=str(data.resolve_data_dir(cfg.data)))
-    like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(styles), jax.random.key(0)))
-    rng = np.random.default_rng(0)
-    state = jax.tree.map(lambda s: rng.normal(0, 0.3, s.shape).astype(s.dtype)
-                         if np.issubdtype(s.dtype, np.floating) else np.zeros(s.shape, s.dtype), like)
-    wd = tmp_path_factory.mktemp("eval_run")
-    meta = train_lib.run_meta(cfg, dataset)
+def tiny_run(random_tiny, tmp_path_factory):
+    """A copy of conftest's random tiny run (the evaluator is written into it) with the
+    config.json that training writes beside its checkpoints."""
+    wd = tmp_path_factory.mktemp("eval_run") / "run"
+    shutil.copytree(random_tiny, wd)
+    _, meta = checkpoint.read_meta(checkpoint.manager(wd / "checkpoints"))
     (wd / "config.json").write_text(json.dumps(meta))
-    checkpoint.save(checkpoint.manager(wd / "checkpoints"), 4, state, meta)
     return wd
 
 

@@ -1,14 +1,11 @@
 import shutil
-import subprocess
-import sys
-from pathlib import Path
+import types
 
 import numpy as np
 import pytest
 
+from conftest import run_cli
 from motiongan_jax import bvh, kinematics
-
-REPO = Path(__file__).resolve().parents[1]
 FILES = ("dataset-2_walk_normal_001.bvh", "dataset-2_walk_elderly_002.bvh", "dataset-2_walk-turn-left_active_001.bvh")
 
 
@@ -22,8 +19,9 @@ def bandai_dir(shared_data, tmp_path):
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, str(REPO / "bin" / "prepare_data.py"), *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
+    """bin/prepare_data.py in this process: (returncode, stdout, stderr) as attributes."""
+    code, out, err = run_cli("prepare_data", args)
+    return types.SimpleNamespace(returncode=code, stdout=out, stderr=err)
 
 
 def test_prepare_data_exports_world_positions(bandai_dir, tmp_path):

@@ -1,13 +1,12 @@
 """Generation: style specs, curves, G on long curves, root height, outputs and bin/generate.py.
 
-The model is the tiny config's G and D with seeded random parameters, saved as a checkpoint
-exactly as the training loop saves one (train.run_meta, checkpoint.save): generation only reads
-a checkpoint, and this skips the data pipeline and the ~40 s of compiling and training (a
-trained tiny model exercises nothing more here; tests/test_train.py covers training). G compiles once per (batch, T); the tests share
-T = 96 (six times the window T 16) and batch 1 where they can.
+The model is conftest's random_tiny: the tiny config's G and D with seeded random parameters,
+saved as a checkpoint exactly as the training loop saves one (train.run_meta, checkpoint.save).
+Generation only reads a checkpoint, and this skips the ~40 s of compiling and training (a trained
+tiny model exercises nothing more here; tests/test_train.py covers training). G compiles once per
+(batch, T); the tests share T = 96 (six times the window T 16) and batch 1 where they can.
 """
 
-import importlib.util
 import os
 import re
 import subprocess
@@ -18,18 +17,19 @@ import jax
 import numpy as np
 import pytest
 
+from conftest import FAST, load_cli
+from conftest import random_run as _random_run
 from motiongan_jax import bvh, checkpoint, curves, generate as gen, ik, kinematics, representation, synthetic
 from motiongan_jax import step as step_lib
 from motiongan_jax.config import load_config, override, to_dict
-from random_model import random_run as _random_run
 
 T_LONG = 96
 SPEED = 1.2
 
 
 @pytest.fixture(scope="module")
-def run_dir(repo, tmp_path_factory):
-    return _random_run(load_config(repo / "configs" / "tiny.py"), tmp_path_factory.mktemp("gen_run"))
+def run_dir(random_tiny):
+    return random_tiny
 
 
 @pytest.fixture(scope="module")
@@ -38,11 +38,8 @@ def run(run_dir):
 
 
 @pytest.fixture(scope="module")
-def cli(repo):
-    spec = importlib.util.spec_from_file_location("_generate_cli", repo / "bin" / "generate.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main
+def cli():
+    return load_cli("generate").main
 
 
 NAMES = ("Childish", "Drunk", "Happy", "Marching", "Normal", "OldMan", "Sad", "Sneaky", "Strong")
@@ -341,13 +338,12 @@ def _wrap(a):
 def _compiled_fast(jitted):
     """`jitted` compiled once per input shape with XLA's backend optimiser off (as the train-step
     tests do): compiling dominates on CPU, and one pass and the chunks are compiled alike."""
-    fast = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
     cache = {}
 
     def call(*args):
         key = tuple((np.shape(a), str(np.asarray(a).dtype)) for a in args[1:] if a is not None)
         if key not in cache:
-            cache[key] = jitted.lower(*args).compile(compiler_options=fast)
+            cache[key] = jitted.lower(*args).compile(compiler_options=FAST)
         return cache[key](*args)
     return call
 
@@ -525,9 +521,7 @@ def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, ca
 def test_cli_progress_shows_only_when_generation_is_slow(repo):
     import io
 
-    spec = importlib.util.spec_from_file_location("_generate_cli_progress", repo / "bin" / "generate.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_cli("generate")
     now = [0.0]
     out = io.StringIO()
     bar = module.Progress(out, delay=2.0, clock=lambda: now[0])

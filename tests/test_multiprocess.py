@@ -15,9 +15,7 @@ import subprocess
 import sys
 import time
 
-import jax
-import numpy as np
-
+from conftest import assert_bit_identical
 from motiongan_jax import checkpoint
 
 # runs bin/train.py with an audit hook that records, on a descriptor opened before it, every
@@ -57,17 +55,6 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def _leaves(state):
-    return jax.tree.leaves((state.g_params, state.d_params, state.d_sn_state, state.opt_g_state, state.opt_d_state))
-
-
-def _assert_bit_identical(a, b):
-    la, lb = _leaves(a), _leaves(b)
-    assert len(la) == len(lb)
-    for x, y in zip(la, lb):
-        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
 
 def _start_pair(repo, workdir, audit_dir, tag, env):
@@ -125,7 +112,7 @@ def test_two_processes_equal_one_with_two_devices_and_resume_after_sigkill(repo,
         p.wait()
     assert (ckdir / "2").is_dir(), procs[0].logs[1].read_text()[-3000:]
     # the 2-process run up to step 2 is the 1-process 2-device run, bit for bit
-    _assert_bit_identical(checkpoint.load_run(ref_dir, 2, params="raw")[0],
+    assert_bit_identical(checkpoint.load_run(ref_dir, 2, params="raw")[0],
                           checkpoint.load_run(run_dir, 2, params="raw")[0])
 
     (out0, _), (out1, _) = _finish(_start_pair(repo, run_dir, audit, "resumed", env))
@@ -133,7 +120,7 @@ def test_two_processes_equal_one_with_two_devices_and_resume_after_sigkill(repo,
     # process 1 prints nothing of its own (gloo's C++ layer announces each rank's connection)
     assert "done:" in out0 and [l for l in out1.splitlines() if not l.startswith("[Gloo]")] == [], out1
     # ... and after the kill and resume, still that run at step 4
-    _assert_bit_identical(checkpoint.load_run(ref_dir, 4, params="raw")[0],
+    assert_bit_identical(checkpoint.load_run(ref_dir, 4, params="raw")[0],
                           checkpoint.load_run(run_dir, 4, params="raw")[0])
 
     # one writer: process 0 wrote the config, file lists and metrics, process 1 nothing but its

@@ -11,17 +11,14 @@ import numpy as np
 import pytest
 from flax import nnx
 
+from conftest import compiled, compiled_call
 from motiongan_jax.nn import (Discriminator, Generator, SpectralNormState, count_params,
                               init_split)
 from motiongan_jax.nn import layers
 from motiongan_jax.nn.discriminator import flatten_channel_major
 
-# Compile time dominates on CPU; the optimiser level does not change what is computed.
-FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
 
-def compiled(fn, *args):
-    return jax.jit(fn).lower(*args).compile(compiler_options=FAST)
 
 
 TOP, T, B, C = 8, 16, 2, 4
@@ -342,13 +339,13 @@ def test_networks_take_metres_and_work_in_their_length_unit():
     gu = Generator(27, base_channels=4, w_dim=8, z_dim=8, num_styles=3, length_unit=u, rngs=nnx.Rngs(0))
     vel = 0.05 * jax.random.normal(jax.random.key(2), (2, 16, 3))
     w = g1.style(jnp.array([0, 1]), jnp.zeros((2, 8)))
-    r1, p1 = g1(vel / u, w)
-    ru, pu = gu(vel, w)
+    r1, p1 = compiled_call(g1, vel / u, w)
+    ru, pu = compiled_call(gu, vel, w)
     np.testing.assert_allclose(ru, r1 * u, rtol=1e-5, atol=1e-9)
     np.testing.assert_allclose(pu, p1 * u, rtol=1e-5, atol=1e-9)
     d1 = Discriminator(27, num_styles=3, seq_len=16, base_channels=4, rngs=nnx.Rngs(1))
     du = Discriminator(27, num_styles=3, seq_len=16, base_channels=4, length_unit=u, rngs=nnx.Rngs(1))
-    a1, c1 = d1(r1, p1, update_stats=False)
-    au, cu = du(ru, pu, update_stats=False)
+    a1, c1 = compiled_call(d1, r1, p1, update_stats=False)
+    au, cu = compiled_call(du, ru, pu, update_stats=False)
     np.testing.assert_allclose(au, a1, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(cu, c1, rtol=1e-4, atol=1e-6)

@@ -1,11 +1,10 @@
 """Inference exports (motiongan_jax/pretrained.py, bin/export_model.py) and the shipped model.
 
-Exports are made from checkpoints of the tiny config with seeded random parameters (random_model),
+Exports are made from checkpoints of the tiny config with seeded random parameters (conftest's random_run),
 with a moving average unlike the trained parameters, so a test can tell which set was exported.
 """
 
 import hashlib
-import importlib.util
 import io
 import json
 import zipfile
@@ -15,19 +14,16 @@ import jax
 import numpy as np
 import pytest
 
+from conftest import load_cli, random_run
 from motiongan_jax import bvh, checkpoint, curves, pretrained
 from motiongan_jax import generate as gen
 from motiongan_jax.config import config_hash, from_dict, load_config, override
-from random_model import random_run
 
 SPEED = 1.2
 
 
 def _cli(repo, name):
-    spec = importlib.util.spec_from_file_location(f"_{name}_cli", repo / "bin" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.main
+    return load_cli(name).main
 
 
 @pytest.fixture(scope="module")

@@ -12,12 +12,11 @@ import numpy as np
 import pytest
 from flax import nnx
 
+from conftest import FAST
 from motiongan_jax import step as step_lib
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 
-# Compile time dominates on CPU; the optimiser level does not change what is computed.
-FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
 J, T, B, C = 27, 16, 2, 4
 METRICS = ("d_adv", "d_cls", "d_total", "g_adv", "g_cls", "g_curve", "g_bone", "g_total",
@@ -500,16 +499,14 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
         return jax.jit(step_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
             compiler_options=FAST)
 
-    step, plain_step = compiled(cfg, state0), compiled(plain_cfg, state0.replace(g_ema_params=None))
+    # (that the average never feeds back, training being that of a run without it, is checked bit
+    # for bit through the training loop: tests/test_train.py's resume test)
+    step = compiled(cfg, state0)
     raw = [jax.tree.map(np.asarray, state0.g_params)]
     state, plain = state0, state0.replace(g_ema_params=None)
     for i in range(2):
         state, _ = step(state, _batch(), jax.random.key(i))
-        plain, _ = plain_step(plain, _batch(), jax.random.key(i))
         raw.append(jax.tree.map(np.asarray, state.g_params))
-    # the average never feeds back: G, D and both optimisers are those of a run without it
-    assert _leaves_equal((state.g_params, state.d_params, state.opt_g_state, state.opt_d_state),
-                         (plain.g_params, plain.d_params, plain.opt_g_state, plain.opt_d_state))
     # e0 = p0, e_k = decay e_(k-1) + (1 - decay) p_k, in numpy
     want = raw[0]
     for p in raw[1:]:

@@ -1,4 +1,9 @@
-"""The training loop: reproducibility, resume, SIGKILL, non-finite stops, the command line."""
+"""The training loop: reproducibility, resume, SIGKILL, non-finite stops, the command line.
+
+The reference is conftest's `trained_tiny`: the tiny config trained for its 4 steps without
+interruption, built once per test run. The resumed and killed runs below are compared with it bit
+for bit, which is also what "same config and seed, same parameters" means (two independent runs
+of one seed)."""
 
 import json
 import os
@@ -11,13 +16,19 @@ import jax
 import numpy as np
 import pytest
 
+from conftest import assert_bit_identical, load_cli, run_cli
 from motiongan_jax import checkpoint, curves, data, step as step_lib, train as train_lib
-from motiongan_jax.config import load_config, override, to_dict
+from motiongan_jax.config import override, to_dict
 
 
 @pytest.fixture(scope="module")
-def tiny(repo):
-    return load_config(repo / "configs" / "tiny.py")
+def tiny(tiny_cfg):
+    return tiny_cfg
+
+
+@pytest.fixture(scope="module")
+def unbroken(trained_tiny):
+    return trained_tiny
 
 
 def _params(workdir, step=None):
@@ -25,24 +36,8 @@ def _params(workdir, step=None):
     return state, meta
 
 
-def _assert_bit_identical(a, b):
-    la, lb = jax.tree.leaves((a.g_params, a.d_params, a.d_sn_state, a.opt_g_state, a.opt_d_state, a.g_ema_params)), \
-        jax.tree.leaves((b.g_params, b.d_params, b.d_sn_state, b.opt_g_state, b.opt_d_state, b.g_ema_params))
-    assert len(la) == len(lb)
-    for x, y in zip(la, lb):
-        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
-
-
-@pytest.fixture(scope="module")
-def unbroken(tiny, tmp_path_factory):
-    """A 4-step tiny run without interruption: the reference for the other tests."""
-    wd = tmp_path_factory.mktemp("unbroken")
-    metrics = train_lib.train(tiny, wd, progress=False, log=lambda s: None)
-    return wd, metrics
-
-
 def test_run_writes_metrics_checkpoints_and_lists(unbroken, tiny):
-    wd, metrics = unbroken
+    wd = unbroken
     lines = [json.loads(x) for x in (wd / "metrics.jsonl").read_text().splitlines()]
     assert [r["step"] for r in lines] == [1, 2, 3, 4]
     for key in ("d_adv", "d_cls", "g_adv", "g_cls", "g_curve", "g_bone", "d_acc_real", "d_acc_fake",
@@ -54,48 +49,40 @@ def test_run_writes_metrics_checkpoints_and_lists(unbroken, tiny):
     assert int(state.step) == 4 and meta["config"]["name"] == "tiny"
 
 
-def test_same_seed_same_parameters(unbroken, tiny, tmp_path):
-    train_lib.train(tiny, tmp_path, progress=False, log=lambda s: None)
-    _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
-
-
 def test_other_seed_other_parameters(unbroken, tiny, tmp_path):
     train_lib.train(override(tiny, ["train.seed=1", "train.num_steps=2", "train.preview_every=2"]), tmp_path,
                     progress=False, log=lambda s: None)
     gif = tmp_path / "previews" / "step_0000002.gif"
     assert gif.read_bytes()[:6] == b"GIF89a"
-    a, _ = _params(unbroken[0], 2)
+    a, _ = _params(unbroken, 2)
     b, _ = _params(tmp_path, 2)
     assert not np.array_equal(np.asarray(jax.tree.leaves(a.g_params)[0]), np.asarray(jax.tree.leaves(b.g_params)[0]))
 
 
-def test_resume_equals_unbroken_even_after_a_half_written_checkpoint(unbroken, tiny, tmp_path):
-    train_lib.train(override(tiny, ["train.num_steps=2"]), tmp_path, progress=False, log=lambda s: None)
+def test_resume_after_a_half_written_checkpoint_equals_unbroken_and_carries_g_ema(unbroken, tiny, tmp_path):
+    """A run with a moving average of G, stopped after step 2 with a half-written checkpoint of step
+    3 left behind, resumes to the unbroken run of the same config bit for bit, its average
+    included; the average never feeds back (training equals the unbroken run without it) and is
+    what generation loads by default. (Resuming a run without an average: the SIGKILL tests.)"""
+    cfg = override(tiny, ["train.g_ema_decay=0.5"])
+    train_lib.train(cfg, tmp_path / "unbroken", progress=False, log=lambda s: None)
+    resumed = tmp_path / "resumed"
+    train_lib.train(override(cfg, ["train.num_steps=2"]), resumed, progress=False, log=lambda s: None)
     # what a process killed inside a save leaves behind: orbax's temporary directory
-    partial = tmp_path / "checkpoints" / "3.orbax-checkpoint-tmp-1234567"
+    partial = resumed / "checkpoints" / "3.orbax-checkpoint-tmp-1234567"
     (partial / "state").mkdir(parents=True)
     (partial / "state" / "garbage").write_bytes(b"\0" * 100)
     logs = []
-    train_lib.train(tiny, tmp_path, progress=False, log=logs.append)
+    train_lib.train(cfg, resumed, progress=False, log=logs.append)
     assert any("resumed from checkpoint at step 2" in s for s in logs)
-    _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
-    steps = [json.loads(x)["step"] for x in (tmp_path / "metrics.jsonl").read_text().splitlines()]
+    steps = [json.loads(x)["step"] for x in (resumed / "metrics.jsonl").read_text().splitlines()]
     assert steps == [1, 2, 3, 4]
-
-
-def test_g_ema_is_checkpointed_resumed_and_used_for_generation(unbroken, tiny, tmp_path):
-    cfg = override(tiny, ["train.g_ema_decay=0.5"])
-    train_lib.train(cfg, tmp_path / "unbroken", progress=False, log=lambda s: None)
-    train_lib.train(override(cfg, ["train.num_steps=2"]), tmp_path / "resumed", progress=False, log=lambda s: None)
-    logs = []
-    train_lib.train(cfg, tmp_path / "resumed", progress=False, log=logs.append)
-    assert any("resumed from checkpoint at step 2" in s for s in logs)
     raw, meta, _, _ = checkpoint.load_run(tmp_path / "unbroken", params="raw")
     assert meta["config"]["train"]["g_ema_decay"] == 0.5
-    # the average is carried over the resume, bit for bit
-    _assert_bit_identical(raw, checkpoint.load_run(tmp_path / "resumed", params="raw")[0])
+    # the resumed run is the unbroken one, the average carried over the resume, bit for bit
+    assert_bit_identical(raw, checkpoint.load_run(resumed, params="raw")[0])
     # and never feeds back: training is that of the run without it
-    _assert_bit_identical(_params(unbroken[0])[0], raw.replace(g_ema_params=None))
+    assert_bit_identical(_params(unbroken)[0], raw.replace(g_ema_params=None))
     ema = checkpoint.load_run(tmp_path / "unbroken")[0]  # the default for generation and analysis
     for got, want in zip(jax.tree.leaves(ema.g_params), jax.tree.leaves(raw.g_ema_params)):
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
@@ -125,7 +112,7 @@ def test_sigkill_and_restart_equals_unbroken(unbroken, repo, tmp_path):
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr
     # checkpoint_every differs from the unbroken run: it changes nothing but when saves happen
-    _assert_bit_identical(_params(unbroken[0])[0], _params(tmp_path)[0])
+    assert_bit_identical(_params(unbroken)[0], _params(tmp_path)[0])
 
 
 def test_non_finite_stops_with_step_and_term(tiny, tmp_path, monkeypatch):
@@ -152,7 +139,7 @@ def test_labels_keep_their_embeddings_and_g_follows_its_code_after_training(unbr
     tiny Latent Transform init leaves the labels' codes w only 10-360 float32 spacings apart (5 seeds)
     (|w| ~ 5e-4), so the labels' own effect on the output is float32 rounding on any CPU; what
     holds everywhere is that each label keeps its own embedding and that G follows its code."""
-    state, meta = _params(unbroken[0])
+    state, meta = _params(unbroken)
     C, T = len(meta["style_names"]), meta["window_T"]
     emb_CxZ = np.asarray(state.g_params["latent"]["embed"])
     gap = min(np.abs(emb_CxZ[a] - emb_CxZ[b]).max() for a in range(C) for b in range(a))
@@ -168,21 +155,19 @@ def test_labels_keep_their_embeddings_and_g_follows_its_code_after_training(unbr
 
 
 def test_command_line_errors(repo, tmp_path):
-    base = [sys.executable, str(repo / "bin" / "train.py"), "--config", str(repo / "configs" / "tiny.py"),
-            "--workdir", str(tmp_path / "wd")]
-    res = subprocess.run(base + ["--set", "data.frame_nums=60"], capture_output=True, text=True, timeout=120)
-    assert res.returncode == 2 and "data.frame_nums" in res.stderr
-    res = subprocess.run(base + ["--data", str(tmp_path / "missing")], capture_output=True, text=True, timeout=120)
-    assert res.returncode == 2 and "data.data_dir" in res.stderr
-    res = subprocess.run(base + ["--set", "model.nope=1"], capture_output=True, text=True, timeout=120)
-    assert res.returncode == 2 and "model.nope" in res.stderr
+    base = ["--config", repo / "configs" / "tiny.py", "--workdir", tmp_path / "wd"]
+    for extra, name in ((["--set", "data.frame_nums=60"], "data.frame_nums"),
+                        (["--data", tmp_path / "missing"], "data.data_dir"),
+                        (["--set", "model.nope=1"], "model.nope")):
+        code, _, err = run_cli("train", base + extra)
+        assert code == 2 and name in err, (extra, err)
     assert not (tmp_path / "wd").exists()
 
 
 def test_incompatible_checkpoint_is_refused(unbroken, tiny, tmp_path):
     import shutil
 
-    shutil.copytree(unbroken[0] / "checkpoints", tmp_path / "checkpoints")
+    shutil.copytree(unbroken / "checkpoints", tmp_path / "checkpoints")
     with pytest.raises(checkpoint.CheckpointError, match="incompatible"):
         train_lib.train(override(tiny, ["model.top=8", "train.num_steps=6"]), tmp_path, progress=False,
                         log=lambda s: None)
@@ -206,11 +191,12 @@ def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
                                     "here")
 
 
-def test_dry_run_prints_parameter_counts(repo):
-    res = subprocess.run([sys.executable, str(repo / "bin" / "train.py"), "--config", str(repo / "configs" / "tiny.py"),
-                          "--workdir", "unused", "--dry-run"], capture_output=True, text=True, timeout=300)
-    assert res.returncode == 0, res.stderr
-    assert "generator" in res.stdout.lower() and "discriminator" in res.stdout.lower()
+def test_dry_run_prints_parameter_counts(repo, tmp_path):
+    code, out, err = run_cli("train", ["--config", repo / "configs" / "tiny.py", "--workdir", tmp_path / "wd",
+                                       "--dry-run"])
+    assert code == 0, err
+    assert "generator" in out.lower() and "discriminator" in out.lower()
+    assert not (tmp_path / "wd").exists()
 
 
 def test_training_on_one_batch_makes_g_follow_its_curves(tiny, tmp_path, monkeypatch):
@@ -238,11 +224,7 @@ def test_training_on_one_batch_makes_g_follow_its_curves(tiny, tmp_path, monkeyp
 def test_dry_run_of_the_paper_config_needs_no_data(repo, capsys, tmp_path):
     """Without the CMU files the paper model is described from the config: CMU's hierarchy
     (28 kept joints, 81 rows) and its 28 styles give the paper's parameter counts."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("train_cli_dry", repo / "bin" / "train.py")
-    cli = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cli)
+    cli = load_cli("train")
     wd = tmp_path / "wd"
     assert cli.main(["--config", str(repo / "configs" / "paper.py"), "--workdir", str(wd), "--dry-run"]) == 0
     out = capsys.readouterr().out
@@ -259,11 +241,7 @@ def test_dry_run_of_the_paper_config_needs_no_data(repo, capsys, tmp_path):
 
 def test_repeated_set_flags_all_apply(repo, capsys):
     """`--set a=1 --set b=2` applies both (the first was once silently dropped)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("train_cli", repo / "bin" / "train.py")
-    cli = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cli)
+    cli = load_cli("train")
     base = ["--config", str(repo / "configs" / "tiny.py"), "--workdir", "unused", "--dry-run"]
     assert cli.main(base + ["--set", "data.frame_nums=60", "--set", "model.top=4"]) == 2
     assert "data.frame_nums" in capsys.readouterr().err

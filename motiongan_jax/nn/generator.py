@@ -62,7 +62,7 @@ the tiled skips' share of dc2_1 / dc1_1 is computed on one column and broadcast,
 "upsample x2 then tconv" is one polyphase correlation of the un-upsampled input
 (`ConvTranspose.upsampled`); the convolutions use `conv.conv2d`'s CPU schedule. `impl="xla"`
 is the straightforward form above (tile, concatenate, upsample, lax.conv), kept as the reference
-that tests/test_speed.py compares against. Parameters are identical.
+that tests/test_fast_equals_reference.py compares against. Parameters are identical.
 
 `compute_dtype="bfloat16"` runs the convolutions and activations in bf16 (mixed precision, for
 GPUs); parameters, AdaIN statistics, the Latent Transform and the outputs stay float32.

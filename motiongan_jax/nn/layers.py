@@ -12,7 +12,7 @@ and holds u and v as non-trainable `SpectralNormState`, like `torch.nn.utils.spe
 
 `impl` (conv layers): "fast" runs the convolutions through `conv.conv2d`'s CPU-tuned schedule,
 "xla" through plain `lax.conv_general_dilated`; same parameters, same results to float32
-rounding (docs/PERFORMANCE.md, tests/test_speed.py).
+rounding (docs/PERFORMANCE.md, tests/test_fast_equals_reference.py).
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def modulated_instance_norm(x_BxTxWxC: jax.Array, s_BxC: jax.Array, b_BxC: jax.A
     The same forward as the plain formula; the backward is written out: with x̂ the normalised
     input and N = T·W, dx = s·rstd·(dy - mean(dy) - x̂·mean(dy·x̂)), ds = Σ dy·x̂, db = Σ dy:
     one fused reduction and one elementwise pass, where autodiff of the formula takes several
-    passes over the activation (tested against it in tests/test_speed.py).
+    passes over the activation (tested against it in tests/test_fast_equals_reference.py).
     Statistics and arithmetic in float32; the result has x's dtype (bf16 compute).
     """
     return _mod_norm_fwd(x_BxTxWxC, s_BxC, b_BxC)[0]
@@ -281,7 +281,7 @@ def upsampled_tconv(x_BxTxWxC: jax.Array, taps: list[jax.Array], *, impl: str = 
     phases ([even | odd] output channels); a few boundary rows get a small correction.
     The phase kernels are weighted sums of the taps, written elementwise so that XLA builds them
     in one pass (at batch 1 the kernels outweigh the activations).
-    Equal to the straightforward form to float32 rounding (tests/test_speed.py)."""
+    Equal to the straightforward form to float32 rounding (tests/test_fast_equals_reference.py)."""
     kt = len(taps)
     b, t, w, _ = x_BxTxWxC.shape
     A, lo, shift = _upsample_phase_coeffs(kt)
