@@ -25,6 +25,7 @@ GFrame = Literal["world", "curve"]
 GanLoss = Literal["bce_prob", "bce_logit"]
 ConvImpl = Literal["fast", "xla"]
 ComputeDtype = Literal["float32", "bfloat16"]
+RecZ = Literal["zero", "sampled"]
 
 
 def choices(literal) -> tuple[str, ...]:
@@ -141,6 +142,13 @@ class TrainConfig:
     # own style at its measured gait phase and compares pose and root sway (L1), so that the
     # phase channels mean what the real feet do (losses.reconstruction_loss).
     w_g_rec: float = 0.0
+    # The reconstructed half's z: "zero", or "sampled" (the same N(0, I) draw as the other half),
+    # so that every z, not only the centre, must walk the window's style.
+    rec_z: RecZ = "zero"
+    # Root jerk (0 in the paper): how far the batch's mean squared second difference of G's root
+    # velocity exceeds the real windows' (losses.root_jerk_excess): G may not plant a foot by
+    # shaking the whole body.
+    w_g_root_jerk: float = 0.0
     w_d_adv: float = 1.0
     w_d_cls: float = 5.0
     # Number of points of the curve loss (paper: 4).
@@ -280,11 +288,12 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
     need(t.log_every >= 1 and t.checkpoint_every >= 1 and t.preview_every >= 0, "train.log_every",
          "log/checkpoint intervals must be >= 1")
     need(0.0 <= t.g_ema_decay < 1.0, "train.g_ema_decay", "must be in [0, 1) (0: no average)")
-    for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec"):
+    for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec", "w_g_root_jerk"):
         need(getattr(t, name) >= 0, f"train.{name}", "loss weights must be >= 0")
     need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride", "needs model.gait_phase (a stride head to train)")
     need(t.w_g_rec == 0 or m.gait_phase, "train.w_g_rec", "needs model.gait_phase (a phase to reconstruct at)")
     need(t.w_g_rec == 0 or t.batch_size >= 2, "train.w_g_rec", "needs train.batch_size >= 2 (half is reconstructed)")
+    need(t.rec_z == "zero" or t.w_g_rec > 0, "train.rec_z", "needs train.w_g_rec > 0 (a half to reconstruct)")
     need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")
     return cfg
 

@@ -142,6 +142,14 @@ def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, co
     return {"floor": jnp.mean(jnp.square(lift_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
 
 
+def root_jerk_excess(fake_vel_BxTx3: jax.Array, real_vel_BxTx3: jax.Array, unit: float = 1.0) -> jax.Array:
+    """max(0, E‖Δ²v_fake‖² − E‖Δ²v_real‖²) in `unit`s², over every window and sample: the root's
+    jerk (second difference of its velocity) may be as large as the real batch's, not larger."""
+    def mean_sq(v_BxTx3):
+        return jnp.mean(jnp.sum(jnp.square(jnp.diff(v_BxTx3, n=2, axis=1)), axis=-1))
+    return jax.nn.relu(mean_sq(fake_vel_BxTx3) - jax.lax.stop_gradient(mean_sq(real_vel_BxTx3))) / unit**2
+
+
 def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax.Array:
     """Mean squared error of G's log stride length against the log of the requested style's
     stride measured on real clips (metres; data.style_strides)."""

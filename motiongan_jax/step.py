@@ -249,10 +249,10 @@ def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, 
 
 def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, curve_BxTx3,
              bone_pairs, bone_lengths_m, train_cfg, length_unit: float, *, log_stride_B=None,
-             gait=None) -> dict[str, jax.Array]:
+             gait=None, real_vel_BxTx3=None) -> dict[str, jax.Array]:
     """G's loss terms (one D call). Curve, bone and foot losses are in units of length_unit.
     The gait terms (train.w_g_stride, w_g_floor, w_g_skate) need `gait`, the stride term also
-    G's `log_stride_B`."""
+    G's `log_stride_B`, the root jerk term (train.w_g_root_jerk) the real batch's root velocity."""
     t = train_cfg
     adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True, labels_B=fake_labels_B)
     adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
@@ -266,6 +266,9 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, c
                                   length_unit)
         terms.update(g_floor=feet["floor"], g_skate=feet["skate"])
         total = total + t.w_g_floor * feet["floor"] + t.w_g_skate * feet["skate"]
+    if t.w_g_root_jerk:
+        terms["g_root_jerk"] = losses.root_jerk_excess(fake_vel_BxTx3, real_vel_BxTx3, length_unit)
+        total = total + t.w_g_root_jerk * terms["g_root_jerk"]
     if t.w_g_stride:
         terms["g_stride"] = losses.stride_loss(log_stride_B, fake_labels_B, gait.stride_m_C)
         total = total + t.w_g_stride * terms["g_stride"]
@@ -336,10 +339,11 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         curve_vel = curves.velocity(curve)
         real_vel = curves.velocity(batch["root_BxTx3"])
         real_pose = batch["pose_BxTxR"]
-        if rec_half:  # the first half: each window's own style, z = 0, its measured phase
+        if rec_half:  # the first half: each window's own style and measured phase, z = 0 or as drawn
             rec_B = jnp.arange(curve.shape[0]) < rec_half
             fake_labels = jnp.where(rec_B, batch["label_B"], fake_labels)
-            z = jnp.where(rec_B[:, None], 0.0, z)
+            if tcfg.rec_z == "zero":
+                z = jnp.where(rec_B[:, None], 0.0, z)
 
         # The single G forward; its VJP carries G's loss gradient back after the D update.
         def g_forward(g_params):
@@ -367,7 +371,7 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
             terms = g_losses(d, *fake_out[:2], fake_labels, curve, bone_pairs, bone_lengths, tcfg,
-                             LENGTH_UNIT_M, log_stride_B=fake_out[2], gait=gait)
+                             LENGTH_UNIT_M, log_stride_B=fake_out[2], gait=gait, real_vel_BxTx3=real_vel)
             if rec_half:
                 h = rec_half
                 terms["g_rec"] = losses.reconstruction_loss(fake_out[0][:h], fake_out[1][:h], real_vel[:h],
