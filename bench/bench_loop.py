@@ -34,23 +34,26 @@ from bench.bench_data import long_clips  # noqa: E402
 from bench.timing import load, median_time  # noqa: E402
 from motiongan_jax import data, step as step_lib  # noqa: E402
 from motiongan_jax.config import load_config, override  # noqa: E402
+from motiongan_jax.train import make_step_fn  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
 def setup(which: str):
-    """(cfg, arrays, layout, num_styles) with real batches for `which`."""
+    """(cfg, arrays, layout, num_styles, step_fn) with real batches for `which`."""
     if which == "small":
         cfg = load_config(CONFIGS / "small.py")
         dataset = data.load_dataset(cfg.data, log=lambda s: None)
         clips, styles, layout = dataset.train, dataset.style_names, dataset.layout
+        step_fn = make_step_fn(cfg, dataset, log=lambda s: None)
     else:
         cfg = override(load_config(CONFIGS / "paper.py", check=False),
                        ["data.data_dir=None", "data.label_rule=synthetic", "data.control_point_interval=256",
                         "data.window_stride=3"])
         clips, styles = long_clips()
         layout = clips[0].layout
-    return cfg, data.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles)
+        step_fn = step_lib.make_train_step(cfg, layout, len(styles))
+    return cfg, data.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles), step_fn
 
 
 def per_step(loop, block: int, repeats: int) -> float:
@@ -72,12 +75,11 @@ def main():
     args = ap.parse_args()
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {load()}")
     for which in args.which.split(","):
-        cfg, arrays, layout, num_styles = setup(which)
+        cfg, arrays, layout, num_styles, step_fn = setup(which)
         block = args.block if which == "small" else max(2, args.block // 10)
         B = cfg.train.batch_size
         k_data, k_step = jax.random.key(1), jax.random.key(2)
         sample_fn = data.make_sample_batch(cfg.data, B)
-        step_fn = step_lib.make_train_step(cfg, layout, num_styles)
         sample = jax.jit(sample_fn)
         train_step = jax.jit(step_fn, donate_argnums=0)
 

@@ -37,7 +37,7 @@ import jax.numpy as jnp  # noqa: E402
 import optax  # noqa: E402
 from flax import nnx  # noqa: E402
 
-from bench.bench_train_step import fake_batch, paper_or_small  # noqa: E402
+from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small, stand_in_gait  # noqa: E402
 from bench.timing import load, median_time  # noqa: E402
 from motiongan_jax import curves, step as step_lib  # noqa: E402
 from motiongan_jax.nn import SpectralNormState  # noqa: E402
@@ -51,6 +51,8 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
     """Seconds of each part of the step, jitted on its own."""
     tcfg = cfg.train
     labels, z = step_lib.sample_labels_and_z(cfg, num_styles, batch["curve_BxTx3"].shape[0], jax.random.key(5))
+    phase = step_lib.sample_phase(cfg, batch["curve_BxTx3"].shape[0], jax.random.key(5))
+    gait = stand_in_gait(cfg, layout, num_styles)
     curve_vel = curves.velocity(batch["curve_BxTx3"])
     real_vel = curves.velocity(batch["root_BxTx3"])
     bone_pairs = tuple((int(a), int(b)) for a, b in layout.bone_pairs)
@@ -58,7 +60,7 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
 
     def g_forward(g_params):
         g = nnx.merge(state.g_def, g_params, copy=True)
-        return g(curve_vel, g.style(labels, z))
+        return g(curve_vel, g.style(labels, z), phase)
 
     def g_fwd_bwd(g_params, cot):
         out, vjp = jax.vjp(g_forward, g_params)
@@ -82,7 +84,8 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
         def obj(f):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
             terms = step_lib.g_losses(d, *f, labels, batch["curve_BxTx3"], bone_pairs, bone_lengths, tcfg,
-                                      LENGTH_UNIT_M)
+                                      LENGTH_UNIT_M, gait=gait, real_vel_BxTx3=real_vel,
+                                      log_stride_B=jnp.zeros(labels.shape))
             return terms["g_total"]
 
         return jax.value_and_grad(obj)(fake)
@@ -160,7 +163,7 @@ def main():
         for name, sec in pieces(cfg, layout, num_styles, state, batch, args.repeats).items():
             print(f"  {name:40s} {sec:8.3f} s   ({load()})", flush=True)
 
-    step_fn = jax.jit(step_lib.make_train_step(cfg, layout, num_styles), donate_argnums=0)
+    step_fn = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
     compiled = step_fn.lower(state, batch, jax.random.key(2)).compile()
     state, m = compiled(state, batch, jax.random.key(3))
     jax.block_until_ready(m)

@@ -31,7 +31,7 @@ import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 from bench.timing import load  # noqa: E402
-from motiongan_jax import step as step_lib, synthetic  # noqa: E402
+from motiongan_jax import data, step as step_lib, synthetic  # noqa: E402
 from motiongan_jax.config import load_config, override  # noqa: E402
 from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton  # noqa: E402
 
@@ -49,7 +49,22 @@ def paper_or_small(which: str):
     return cfg, layout, num_styles
 
 
+def stand_in_gait(cfg, layout, num_styles):
+    """Gait targets of the right kind for configs with gait terms (their values do not change
+    the step's cost), else None."""
+    t = cfg.train
+    if not (t.w_g_stride or t.w_g_floor or t.w_g_skate):
+        return None
+    return data.GaitTargets((1.2,) * num_styles, 0.02, data.foot_joints(layout))
+
+
+def bench_step_fn(cfg, layout, num_styles):
+    """The pure train step of `cfg` on fake data (fake_batch)."""
+    return step_lib.make_train_step(cfg, layout, num_styles, stand_in_gait(cfg, layout, num_styles))
+
+
 def fake_batch(B, T, R, num_styles, key):
+    """Random batch of the step's shapes, with a gait phase (read by configs with train.w_g_rec)."""
     k1, k2, k3, k4 = jax.random.split(key, 4)
     t = jnp.arange(T, dtype=jnp.float32)[None, :, None]
     root = jnp.concatenate([0.1 * t, jnp.ones((1, T, 1)), jnp.zeros((1, T, 1))], -1) + 0.01 * jax.random.normal(k1, (B, T, 3))
@@ -58,6 +73,8 @@ def fake_batch(B, T, R, num_styles, key):
         "pose_BxTxR": 0.3 * jax.random.normal(k2, (B, T, R)),
         "curve_BxTx3": root.at[..., 1].set(0.0) + 0.01 * jax.random.normal(k3, (B, T, 3)),
         "label_B": jax.random.randint(k4, (B,), 0, num_styles),
+        "phase_BxT": jnp.broadcast_to(0.5 * t[..., 0], (B, T)),
+        "phase_valid_BxT": jnp.ones((B, T), bool),
     }
 
 
@@ -71,7 +88,7 @@ def peak_device_memory() -> str:
 def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
     B, T = cfg.train.batch_size, cfg.data.window_T
     state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
-    step_fn = jax.jit(step_lib.make_train_step(cfg, layout, num_styles), donate_argnums=0)
+    step_fn = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
     t0 = time.perf_counter()
     compiled = step_fn.lower(state, batch, jax.random.key(2)).compile()

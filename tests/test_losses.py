@@ -178,3 +178,26 @@ def test_reconstruction_loss_by_hand_and_mask():
     # samples without a measured phase do not count
     assert float(losses.reconstruction_loss(vel, pose, vel, real_pose, valid.at[0, 1].set(False), 0.3)) == 0.0
     assert float(losses.reconstruction_loss(vel, pose, vel, real_pose, jnp.zeros((B, T), bool), 0.3)) == 0.0
+
+
+def test_root_jerk_excess_by_hand():
+    # Real: constant velocity (no jerk). Fake: x velocity alternating +a, -a: its second
+    # difference is ±4a at every one of the T - 2 inner samples, so E‖Δ²v‖² = 16 a².
+    t, a, unit = 10, 0.3, 0.5
+    real_BxTx3 = jnp.tile(jnp.array([0.1, 0.0, 0.2]), (2, t, 1))
+    sign_T = jnp.where(jnp.arange(t) % 2 == 0, 1.0, -1.0)
+    fake_BxTx3 = real_BxTx3.at[..., 0].add(a * sign_T)
+    assert float(losses.root_jerk_excess(fake_BxTx3, real_BxTx3, unit)) == pytest.approx(16 * a**2 / unit**2, rel=1e-5)
+    # Only the excess over the real batch is paid for: a fake as jerky as the real costs nothing,
+    # and a smoother one gets no push toward more jerk.
+    assert float(losses.root_jerk_excess(fake_BxTx3, fake_BxTx3)) == 0.0
+    assert float(losses.root_jerk_excess(real_BxTx3, fake_BxTx3)) == 0.0
+    g_BxTx3 = jax.grad(lambda f: losses.root_jerk_excess(f, fake_BxTx3))(real_BxTx3)
+    np.testing.assert_array_equal(np.asarray(g_BxTx3), 0.0)
+    # No gradient reaches the real windows.
+    g_real = jax.grad(lambda r: losses.root_jerk_excess(fake_BxTx3, r))(real_BxTx3)
+    np.testing.assert_array_equal(np.asarray(g_real), 0.0)
+    # A gradient step lowers it (the fake is pushed toward smoothness).
+    g = jax.grad(lambda f: losses.root_jerk_excess(f, real_BxTx3))(fake_BxTx3)
+    smoother = fake_BxTx3 - 0.01 * g
+    assert float(losses.root_jerk_excess(smoother, real_BxTx3)) < float(losses.root_jerk_excess(fake_BxTx3, real_BxTx3))
