@@ -52,8 +52,7 @@ def paper_or_small(which: str):
 def stand_in_gait(cfg, layout, num_styles):
     """Gait targets of the right kind for configs with gait terms (their values do not change
     the step's cost), else None."""
-    t = cfg.train
-    if not (t.w_g_stride or t.w_g_floor or t.w_g_skate):
+    if not step_lib.needs_gait_targets(cfg.train):
         return None
     return data.GaitTargets((1.2,) * num_styles, 0.02, data.foot_joints(layout))
 

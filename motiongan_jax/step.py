@@ -305,6 +305,11 @@ def check_batch(batch: dict, num_rows: int) -> None:
         raise ValueError(f"batch shapes disagree: {bad}; expected {want}")
 
 
+def needs_gait_targets(train_cfg) -> bool:
+    """Whether the config's G loss has a term that reads data.GaitTargets."""
+    return bool(train_cfg.w_g_stride or train_cfg.w_g_floor or train_cfg.w_g_skate)
+
+
 def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     """`train_step(state, batch, key) -> (state, metrics)`, pure; jit it with donate_argnums=0.
 
@@ -315,7 +320,7 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     """
     tcfg = cfg.train
     rec_half = tcfg.batch_size // 2 if tcfg.w_g_rec else 0
-    if (tcfg.w_g_stride or tcfg.w_g_floor or tcfg.w_g_skate) and gait is None:
+    if needs_gait_targets(tcfg) and gait is None:
         raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate) need gait targets")
     if gait is not None and len(gait.stride_m_C) != num_styles:
         raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths for {num_styles} styles")

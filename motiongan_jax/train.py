@@ -131,8 +131,7 @@ def make_step_fn(cfg: Config, dataset, log=print):
     """The pure `train_step(state, batch, key)` for this dataset, with the gait targets of its
     training clips when the config's gait terms need them."""
     gait = None
-    t = cfg.train
-    if t.w_g_stride or t.w_g_floor or t.w_g_skate:
+    if step_lib.needs_gait_targets(cfg.train):
         gait = data.gait_targets(dataset.train, dataset.style_names, dataset.layout)
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
             + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))

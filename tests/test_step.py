@@ -487,6 +487,48 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
         validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, gait_phase=False)))
 
 
+def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
+    # The step's g_rec and g_root_jerk recomputed outside it, from G before the update: the first
+    # window asks for its own style at its own phase, with z = 0 or with the z drawn for it.
+    from motiongan_jax import curves, losses
+    from motiongan_jax.representation import LENGTH_UNIT_M
+
+    cfg0, gait = _gait_cfg()
+    batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
+             "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2}
+    key = jax.random.key(3)
+    curve_vel, real_vel = curves.velocity(batch["curve_BxTx3"]), curves.velocity(batch["root_BxTx3"])
+    g_rec = {}
+    for rec_z in ("zero", "sampled"):
+        cfg = validate(dataclasses.replace(cfg0, train=dataclasses.replace(
+            cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0)))
+        state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
+        # at init w barely depends on z: a larger latent transform lets the two choices differ
+        g_params = jax.tree.map(lambda x: x, state0.g_params)
+        g_params["latent"] = jax.tree.map(lambda x: 10.0 * x, g_params["latent"])
+        state0 = state0.replace(g_params=g_params)
+        _, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, key).compile(
+            compiler_options=FAST)(state0, batch, key)
+        labels, z = step_lib.sample_labels_and_z(cfg, C, B, key)
+        labels = labels.at[0].set(batch["label_B"][0])
+        if rec_z == "zero":
+            z = z.at[0].set(0.0)
+        g = step_lib.generator(state0)
+        w = g.style(labels, z)
+        offset = step_lib.sample_phase(cfg, B, key)
+        phase_BxT = g.walked_phase(curve_vel, w, offset).at[0].set(batch["phase_BxT"][0])
+        root_vel, pose = g(curve_vel, w, offset, phase_BxT)
+        want_rec = losses.reconstruction_loss(root_vel[:1], pose[:1], real_vel[:1], batch["pose_BxTxR"][:1],
+                                              batch["phase_valid_BxT"][:1], LENGTH_UNIT_M)
+        want_jerk = losses.root_jerk_excess(root_vel, real_vel, LENGTH_UNIT_M)
+        assert float(m["g_rec"]) == pytest.approx(float(want_rec), rel=1e-4)
+        assert float(m["g_root_jerk"]) == pytest.approx(float(want_jerk), rel=1e-4, abs=1e-9)
+        g_rec[rec_z] = float(m["g_rec"])
+    assert g_rec["zero"] != pytest.approx(g_rec["sampled"], rel=1e-3)  # the drawn z reaches the half
+    with pytest.raises(Exception, match="train.rec_z"):
+        validate(dataclasses.replace(cfg0, train=dataclasses.replace(cfg0.train, rec_z="sampled")))
+
+
 def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged():
     decay = 0.75
     plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4)))
