@@ -10,20 +10,16 @@ The tconv rows are the layers as `ConvTranspose.__call__` runs them (a zero-padd
 with kwidth·out channels); "dc1_1 poly" etc. are the polyphase form of `ConvTranspose.upsampled`
 (x at half the time resolution, (kt//2 + 2) taps, [even | odd] channels) on the skip-free part.
 
-  JAX_PLATFORMS=cpu python bench/bench_conv.py [--layers dc1_0,dc1_1] [--impl xla,fast] [--batch 24]
+  JAX_PLATFORMS=cpu python -m bench.bench_conv [--layers dc1_0,dc1_1] [--impl xla,fast] [--batch 24]
 """
 
 import argparse
 import os
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import jax
 
-import jax  # noqa: E402
-
-from bench.timing import load, median_time  # noqa: E402
-from motiongan_jax.nn.conv import conv2d  # noqa: E402
+from bench.timing import load, median_time
+from motiongan_jax.nn.conv import conv2d
 
 # name: (T, W, C_in, C_out, kernel (kt, kwidth), stride, padding inside the conv) of the padded input
 # the layer hands to the convolution (reflect padding already applied for convs).

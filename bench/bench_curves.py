@@ -3,21 +3,18 @@
 B = 24 windows of 512, 1024 and 1536 frames (FPS augmentation steps 4, 8, 12) padded to 1536,
 control points every 256 frames, T = 128 points, noise 0.02. Prints the median of 50 runs.
 
-    JAX_PLATFORMS=cpu python bench/bench_curves.py [--runs 50]
+    JAX_PLATFORMS=cpu python -m bench.bench_curves [--runs 50]
 """
 
 from __future__ import annotations
 
 import argparse
-import pathlib
-import sys
 import time
 
 import jax
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # run from a checkout
-from motiongan_jax import curves  # noqa: E402
+from motiongan_jax import curves
 
 
 def main() -> None:

@@ -7,25 +7,22 @@
    augmentation, noisy spline curves) from cached arrays. Reference PyTorch loader on this machine
    kind: 0.58-0.86 s per batch (docs/PERFORMANCE.md).
 
-  JAX_PLATFORMS=cpu python bench/bench_data.py [--data DIR] [--repeats 3]
+  JAX_PLATFORMS=cpu python -m bench.bench_data [--data DIR] [--repeats 3]
 """
 
 import argparse
 import os
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import jax
+import numpy as np
 
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-
-from motiongan_jax import data, kinematics, synthetic  # noqa: E402
-from motiongan_jax.config import DataConfig  # noqa: E402
-from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton, to_rows  # noqa: E402
+from motiongan_jax import data, kinematics, synthetic
+from motiongan_jax.config import DataConfig
+from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton, to_rows
 
 SHARED = Path(os.environ.get("MOTIONGAN_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 

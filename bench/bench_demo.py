@@ -9,20 +9,16 @@ bucket, and a new path length inside a bucket already compiled (which must not c
 Cases: a 10 m S-curve (one style; a mix of two; an expression; three styles side by side;
 K = 3 samples of z) and a drawn-looking 10 m path that changes a little every request.
 
-  JAX_PLATFORMS=cpu python bench/bench_demo.py [--repeats 15] [--workdir RUN | --model FILE]
+  JAX_PLATFORMS=cpu python -m bench.bench_demo [--repeats 15] [--workdir RUN | --model FILE]
 """
 
 import argparse
 import statistics
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from bench.timing import load  # noqa: E402
+from bench.timing import load
 
 
 def main() -> None:

@@ -11,24 +11,20 @@ positions + floor contact), the library call behind bin/generate.py.
 Reference PyTorch on this machine kind (2 threads, eval, no_grad, latent transform included):
 84 ms at T 128, 0.62 s at T 1024; the goals are <= 30 ms and <= 0.2 s (docs/PERFORMANCE.md).
 
-  JAX_PLATFORMS=cpu python bench/bench_inference.py [--impl fast,xla] [--lengths 128,1024,1800] [--repeats 7]
+  JAX_PLATFORMS=cpu python -m bench.bench_inference [--impl fast,xla] [--lengths 128,1024,1800] [--repeats 7]
 """
 
 import argparse
 import os
 import statistics
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import jax
+import jax.numpy as jnp
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-
-from bench.bench_train_step import paper_or_small  # noqa: E402
-from bench.timing import load  # noqa: E402
-from motiongan_jax import curves, generate, step as step_lib  # noqa: E402
+from bench.bench_train_step import paper_or_small
+from bench.timing import load
+from motiongan_jax import curves, generate, step as step_lib
 
 REFERENCE_S = {128: 0.084, 1024: 0.62}
 GOAL_S = {128: 0.030, 1024: 0.2}

@@ -16,25 +16,22 @@ is dispatched, as train.py does):
 The small config reads the embedded dataset; the paper shapes use four long synthetic 120 fps
 clips (bench_data.py's set-up: 1024 frames at step 8, FPS and rotation augmentation).
 
-  JAX_PLATFORMS=cpu python bench/bench_loop.py [--which small,paper] [--block 20] [--repeats 5]
+  JAX_PLATFORMS=cpu python -m bench.bench_loop [--which small,paper] [--block 20] [--repeats 5]
 """
 
 import argparse
 import os
 import statistics
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import jax
 
-import jax  # noqa: E402
-
-from bench.bench_data import long_clips  # noqa: E402
-from bench.timing import load, median_time  # noqa: E402
-from motiongan_jax import data, step as step_lib  # noqa: E402
-from motiongan_jax.config import load_config, override  # noqa: E402
-from motiongan_jax.train import make_step_fn  # noqa: E402
+from bench.bench_data import long_clips
+from bench.timing import load, median_time
+from motiongan_jax import data, step as step_lib
+from motiongan_jax.config import load_config, override
+from motiongan_jax.train import make_step_fn
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 

@@ -10,7 +10,7 @@ buffers. Two kinds of child:
 * `train`: `bin/train.py --config configs/small.py --steps N` in a temporary workdir: a whole
   training run (embedded dataset, data pipeline, metrics, checkpoints, a preview).
 
-  JAX_PLATFORMS=cpu python bench/bench_memory.py [--which small,paper] [--impl fast,xla] [--steps 3] [--no-train]
+  JAX_PLATFORMS=cpu python -m bench.bench_memory [--which small,paper] [--impl fast,xla] [--steps 3] [--no-train]
 """
 
 import argparse
@@ -23,9 +23,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# run with -c in the repository root (run_child), so that `bench` imports as under `python -m bench.X`
 CHILD = r"""
-import sys, time
-sys.path.insert(0, {root!r})
 import jax
 from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small
 from motiongan_jax import step as step_lib
@@ -40,9 +39,9 @@ for i in range({steps}):
 
 
 def run_child(argv, env=None) -> tuple[float, float, int]:
-    """(peak RSS in MiB, wall seconds, exit status) of a child process."""
+    """(peak RSS in MiB, wall seconds, exit status) of a child process started in the repository root."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(argv, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     err = proc.stderr.read().decode(errors="replace")
     proc.stderr.close()
@@ -62,7 +61,7 @@ def main():
     print(f"{os.cpu_count()} cpus; load {os.getloadavg()[0]:.2f}")
     for which in args.which.split(","):
         for impl in args.impl.split(","):
-            code = CHILD.format(root=str(ROOT), which=which, impl=impl, steps=args.steps)
+            code = CHILD.format(which=which, impl=impl, steps=args.steps)
             rss, wall, status = run_child([sys.executable, "-c", code], env)
             print(f"  step loop, {which} config [{impl}], {args.steps} steps: peak RSS {rss:7.0f} MiB "
                   f"({wall:.0f} s, exit {status})", flush=True)

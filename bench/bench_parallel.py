@@ -12,7 +12,7 @@ On a CPU the forced devices share the machine's cores, so this shows the cost of
 step and of the collectives, not a speed-up; on GPUs (drop JAX_PLATFORMS=cpu; the layouts are
 then real devices) it shows the scaling.
 
-  JAX_PLATFORMS=cpu python bench/bench_parallel.py [--which small] [--layouts 1x1,1x2,2x1]
+  JAX_PLATFORMS=cpu python -m bench.bench_parallel [--which small] [--layouts 1x1,1x2,2x1]
                                                    [--block 10] [--repeats 5] [--set a=b ...]
 """
 
@@ -26,7 +26,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 
 def child(args) -> None:
@@ -100,8 +99,9 @@ def main() -> None:
     args = ap.parse_args()
     if args.child:
         return child(args)
-    common = [sys.executable, __file__, "--child", "--which", args.which, "--block", str(args.block),
-              "--repeats", str(args.repeats)] + (["--set", *args.set] if args.set else [])
+    # children run as `python -m bench.bench_parallel` in the repository root, where `bench` imports
+    common = [sys.executable, "-m", "bench.bench_parallel", "--child", "--which", args.which,
+              "--block", str(args.block), "--repeats", str(args.repeats)] + (["--set", *args.set] if args.set else [])
     for layout in args.layouts.split(","):
         procs, devices = (int(x) for x in layout.split("x"))
         env = dict(os.environ)
@@ -111,7 +111,8 @@ def main() -> None:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         runs = [subprocess.Popen(common + ["--coordinator", f"127.0.0.1:{port}", "--num-processes", str(procs),
-                                           "--process-id", str(i)], env=env, stdout=subprocess.PIPE, text=True)
+                                           "--process-id", str(i)], env=env, cwd=ROOT, stdout=subprocess.PIPE,
+                                 text=True)
                 for i in range(procs)]
         for r in runs:
             out, _ = r.communicate()

@@ -16,7 +16,7 @@ under-counted; the pieces are exact.
 The machine is shared: the load average is printed with every figure; compare runs taken close
 together, and prefer the op shares to the absolute seconds.
 
-  JAX_PLATFORMS=cpu python bench/bench_profile.py [--which paper] [--impl fast] [--repeats 3] [--no-ops]
+  JAX_PLATFORMS=cpu python -m bench.bench_profile [--which paper] [--impl fast] [--repeats 3] [--no-ops]
 """
 
 import argparse
@@ -25,24 +25,20 @@ import glob
 import os
 import re
 import statistics
-import sys
 import tempfile
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import jax
+import jax.numpy as jnp
+import optax
+from flax import nnx
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import optax  # noqa: E402
-from flax import nnx  # noqa: E402
-
-from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small, stand_in_gait  # noqa: E402
-from bench.timing import load, median_time  # noqa: E402
-from motiongan_jax import curves, step as step_lib  # noqa: E402
-from motiongan_jax.nn import SpectralNormState  # noqa: E402
-from motiongan_jax.nn.generator import Generator  # noqa: E402
-from motiongan_jax.representation import LENGTH_UNIT_M  # noqa: E402
+from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small, stand_in_gait
+from bench.timing import load, median_time
+from motiongan_jax import curves, step as step_lib
+from motiongan_jax.nn import SpectralNormState
+from motiongan_jax.nn.generator import Generator
+from motiongan_jax.representation import LENGTH_UNIT_M
 
 SCOPES = Generator.BLOCKS + ("heads", "D")
 

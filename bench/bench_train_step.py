@@ -14,26 +14,23 @@ plain lax.conv), `--impl fast` (default) the rewrites of nn/conv.py and nn/gener
 `--dtype bfloat16` times mixed precision (bf16 activations, float32 parameters and optimizer
 state). On a GPU (drop JAX_PLATFORMS=cpu) it also prints it/s and the allocator's peak memory.
 
-  JAX_PLATFORMS=cpu python bench/bench_train_step.py [--which paper,small] [--impl fast,xla]
+  JAX_PLATFORMS=cpu python -m bench.bench_train_step [--which paper,small] [--impl fast,xla]
                                                      [--dtype float32,bfloat16] [--repeats 5]
 """
 
 import argparse
 import os
 import statistics
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import jax
+import jax.numpy as jnp
 
-import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-
-from bench.timing import load  # noqa: E402
-from motiongan_jax import data, step as step_lib, synthetic  # noqa: E402
-from motiongan_jax.config import load_config, override  # noqa: E402
-from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton  # noqa: E402
+from bench.timing import load
+from motiongan_jax import data, step as step_lib, synthetic
+from motiongan_jax.config import load_config, override
+from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 REFERENCE_STEP_S = 8.57

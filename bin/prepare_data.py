@@ -1,43 +1,6 @@
 #!/usr/bin/env python
-"""Export BVH files as world joint positions (metres, Y up) in one .npz for your own code.
+"""Export BVH files as world joint positions: motiongan_jax/cli/prepare_data.py (also `motiongan-prepare-data`)."""
 
-  python bin/prepare_data.py DATA_DIR --out FILE.npz [--labels paper|bandai|cmu]
+from motiongan_jax.cli.prepare_data import main
 
-Arrays: positions (frames x joints x 3, every joint incl. End Sites, all clips concatenated),
-joint_names, parents, clip_start, clip_length, clip_style, style_names, fps, source_files.
-"""
-
-import argparse
-import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from motiongan_jax.bvh import BVHError  # noqa: E402
-from motiongan_jax.data import DataError  # noqa: E402
-from motiongan_jax.config import LabelRule, choices  # noqa: E402
-from motiongan_jax.dataset_export import export_positions  # noqa: E402
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("data_dir")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--labels", choices=choices(LabelRule), default="paper",
-                    help="file-name rule for style labels (also picks the unit: bandai cm, else CMU units)")
-    ap.add_argument("--units-to-m", type=float, default=None, help="metres per file unit (overrides --labels)")
-    ap.add_argument("--skip-bad", action="store_true", help="report malformed files and go on with the rest")
-    args = ap.parse_args(argv)
-    try:
-        info = export_positions(args.data_dir, args.out, args.labels, args.units_to_m, args.skip_bad,
-                                log=lambda s: print(s, file=sys.stderr))
-    except (BVHError, DataError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-    print(f"wrote {args.out}: {info['clips']} clips, {info['frames']} frames, {info['joints']} joints, "
-          f"{len(info['styles'])} styles ({', '.join(info['styles'])})")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+raise SystemExit(main())

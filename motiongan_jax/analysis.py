@@ -1,7 +1,7 @@
 """The learned style space: codes, PCA, distances, blending, a linear probe, and style search.
 
 docs/DESIGN.md §5.2 (analysis) and §5.3 (style search), with the reference's bugs fixed (§6).
-All numerics are jnp; plots live in `viz.py`, files are written by `bin/analyze.py`.
+All numerics are jnp; plots live in `viz.py`, files are written by `analysis_report.py`.
 
 Style codes. w = LT(label, z) (`generate.latent_codes`): `label_codes` gives, for every label,
 w at z = 0 (what the inference tools use) and K codes from z ~ N(0, I), whose mean is the

@@ -12,6 +12,7 @@ report gives mean ± 95% CI over seeds (`metrics.mean_ci95`). Real data have no 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -23,8 +24,9 @@ import numpy as np
 import scipy.special
 from scipy.ndimage import gaussian_filter1d
 
-from motiongan_jax import analysis, curves, evaluator, generate, metrics
+from motiongan_jax import analysis, atomic, checkpoint, curves, data, evaluator, generate, metrics
 from motiongan_jax import step as step_lib
+from motiongan_jax.config import ConfigError, config_hash
 from motiongan_jax.representation import facing_joints, foot_joints, from_rows, rest_positions
 
 TURNING_DEG = 45.0  # a held-out path whose heading changes more than this is "turning"
@@ -725,3 +727,100 @@ def to_jsonable(x):
 
 def dumps(report: dict) -> str:
     return json.dumps(to_jsonable(report), indent=1) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------
+# A trained run evaluated end to end, and the report's files (bin/evaluate.py)
+
+
+def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: int | None = None,
+                 params: str = "ema", data_dir=None, evaluator_path=None, cmu_curves=None,
+                 log: Callable[[str], None] = print) -> tuple[dict, Context]:
+    """The protocol on the run `workdir` (its checkpoint `step`, G's `params`): loads the model, the
+    evaluator (default WORKDIR/evaluator.npz, which must match the run) and the run's data (or
+    `data_dir`), builds the unseen curves (held-out paths, the root paths of the BVH files in
+    `cmu_curves`, the synthetic `shapes`) and evaluates. Returns the report {"header", "results"}
+    and the context (for `write_report`). Raises ConfigError, DataError, BVHError,
+    CheckpointError, EvaluatorError, EvaluationError or GenerateError naming the problem."""
+    state, meta, cfg, layout = checkpoint.load_run(workdir, step, params)
+    ckpt_step, _ = checkpoint.read_meta(checkpoint.manager(Path(workdir) / "checkpoints"), step)
+    if data_dir is not None:
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=data_dir))
+    ev_path = Path(evaluator_path) if evaluator_path else Path(workdir) / "evaluator.npz"
+    ev = evaluator.load(ev_path)
+    style_names = tuple(meta["style_names"])
+    problems = []
+    if tuple(ev.style_names) != style_names:
+        problems.append(f"styles {list(ev.style_names)} vs the model's {list(style_names)}")
+    if tuple(ev.meta.get("joint_names", ())) != tuple(layout.joint_names):
+        problems.append("a different skeleton")
+    if ev.meta.get("window_T") != cfg.data.window_T:
+        problems.append(f"window T {ev.meta.get('window_T')} vs {cfg.data.window_T}")
+    if problems:
+        raise evaluator.EvaluatorError(f"{ev_path} does not match the run {workdir}: " + "; ".join(problems))
+    dataset = data.load_dataset(cfg.data)
+    if tuple(dataset.style_names) != style_names:
+        raise data.DataError(f"the data's styles {list(dataset.style_names)} differ from the model's")
+    if not dataset.val:
+        raise data.DataError("the validation split is empty: no held-out data to evaluate on")
+    rate = generate.sample_rate(meta, cfg)
+    T = cfg.data.window_T
+    L = settings.windows_per_curve * T
+    speed = median_speed(dataset.val, dataset.fps)
+    eval_curves = heldout_curves(dataset.val, cfg, L, settings.max_heldout_curves)
+    if cmu_curves:
+        files = sorted(Path(cmu_curves).glob("*.bvh"))
+        if not files:
+            raise ConfigError(f"--cmu-curves {cmu_curves}: no .bvh files")
+        eval_curves += file_curves(files[: settings.max_cmu_curves], rate, L, T,
+                                   cfg.data.control_point_interval / dataset.fps, log=log)
+    eval_curves += shape_curves(rate, speed, L, T, shapes)
+    feet = foot_joints(layout)
+    contact = data.contact_height(dataset.train, layout, feet)
+    log(f"contact height {contact * 100:.1f} cm (calibrated on the training clips)")
+    long_curve = long_line(rate, speed, settings.long_curve_m)
+    probe = jax.jit(data.make_sample_batch(cfg.data, PROBE_WINDOWS))(
+        data.build_arrays(dataset.train, dataset.style_names, cfg.data), jax.random.key(0), 0)
+    ctx = Context(state, meta, cfg, layout, ev, style_names, dataset.val, rate, feet,
+                  eval_curves, settings, contact, long_curve, probe)
+    results = evaluate(ctx, log=log)
+
+    counts = {}
+    for c in eval_curves:
+        counts[c.kind] = counts.get(c.kind, 0) + 1
+    header = {
+        "workdir": str(workdir), "config_name": cfg.name, "config_hash": config_hash(cfg),
+        "checkpoint_step": ckpt_step,
+        "g_params": (f"moving average (train.g_ema_decay {cfg.train.g_ema_decay})"
+                     if params == "ema" and cfg.train.g_ema_decay > 0 else "raw"),
+        "evaluator": str(ev_path), "evaluator_checksum": ev.checksum,
+        "evaluator_real_heldout": ev.meta.get("real_heldout"), "style_names": list(style_names),
+        "settings": dataclasses.asdict(settings), "curve_counts": counts,
+        "curves": [{"name": c.name, "kind": c.kind, "samples": len(c.curve_Lx3), "source": c.source} for c in eval_curves],
+        "train_files": sorted(Path(c.source).name for c in dataset.train),
+        "val_files": sorted(Path(c.source).name for c in dataset.val),
+        "data_dir": dataset.data_dir, "walking_speed_m_per_s": speed, "sample_rate_hz": rate,
+        "feet": [layout.joint_names[i] for i in feet],
+    }
+    return {"header": header, "results": results}, ctx
+
+
+def write_report(out, report: dict, ctx: Context) -> str:
+    """Writes OUT/report.json, report.md, confusion.png and pca_w.png (OUT created); returns the
+    SHA-256 of report.json as written."""
+    from motiongan_jax import viz
+
+    out = Path(out)
+    results = report["results"]
+    out.mkdir(parents=True, exist_ok=True)
+    atomic.write_text(out / "report.json", dumps(report))
+    atomic.write_text(out / "report.md", markdown(to_jsonable(report)))
+    plot_confusion(results["confusion_generated"], results["confusion_real"], ctx.style_names,
+                   out / "confusion.png")
+    codes = analysis.label_codes(ctx.state, ctx.style_names, k=10)
+    X, y = codes.flat_samples
+    p = analysis.pca(X, 2)
+    viz.plot_style_pca(np.asarray(analysis.pca_transform(p, X)), np.asarray(y), ctx.style_names, out / "pca_w.png",
+                       centroids_Cx2=np.asarray(analysis.pca_transform(p, codes.centroids_CxD)),
+                       explained=np.asarray(p.explained_variance_ratio_K)[:2])
+    return hashlib.sha256((out / "report.json").read_bytes()).hexdigest()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import importlib.util
+import importlib
 import io
 import os
 import shutil
@@ -44,15 +44,12 @@ def compiled_call(module, *args, **kwargs):
 
 
 def load_cli(name: str):
-    """bin/NAME.py as a module (its `main(argv)` returns the exit status)."""
-    spec = importlib.util.spec_from_file_location(f"_{name}_cli", REPO / "bin" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """motiongan_jax.cli.NAME, the tool behind bin/NAME.py (its `main(argv)` returns the exit status)."""
+    return importlib.import_module(f"motiongan_jax.cli.{name}")
 
 
 def run_cli(name: str, argv) -> tuple[int, str, str]:
-    """(exit status, stdout, stderr) of bin/NAME.py's main(argv), in this process; a SystemExit
+    """(exit status, stdout, stderr) of the tool NAME's main(argv), in this process; a SystemExit
     (argparse's usage errors) counts as its exit status."""
     main = load_cli(name).main
     out, err = io.StringIO(), io.StringIO()

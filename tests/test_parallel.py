@@ -6,8 +6,6 @@ import sys
 import textwrap
 
 SCRIPT = textwrap.dedent("""
-    import os, sys
-    sys.path.insert(0, {repo!r})
     import jax, jax.numpy as jnp, numpy as np
     from motiongan_jax import parallel, step as step_lib
     from motiongan_jax.config import load_config, override

@@ -1,0 +1,66 @@
+"""Evaluate a trained run with the project's protocol (docs/DESIGN.md §7).
+
+  python bin/evaluate.py --workdir runs/small --out runs/small/eval
+                         [--data DATA_DIR] [--evaluator runs/small/evaluator.npz]
+                         [--cmu-curves DATA_DIR/cmu] [--seeds 0,1,2] [--k 3] [--step N]
+
+Generates for every (unseen curve × style) with K noise draws and each seed; unseen curves are
+the run's held-out real root paths (straight and turning), the root paths of the BVH files in
+--cmu-curves (another lab: only their floor path is used), and the synthetic shapes. Scores
+generated and real held-out data side by side with the evaluator (bin/train_evaluator.py).
+Writes OUT/report.json, OUT/report.md, OUT/confusion.png and OUT/pca_w.png.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--workdir", required=True, help="a training run (its latest checkpoint)")
+    ap.add_argument("--out", required=True, help="output directory")
+    ap.add_argument("--data", default=None, help="the run's data directory (default: as trained)")
+    ap.add_argument("--evaluator", default=None, help="evaluator .npz (default WORKDIR/evaluator.npz)")
+    ap.add_argument("--cmu-curves", default=None, help="directory of BVH files whose root paths are used as curves")
+    ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument("--k", type=int, default=3, help="noise draws per (curve, style), >= 3 in the protocol")
+    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: latest)")
+    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
+                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
+    ap.add_argument("--search-steps", type=int, default=200, help="style-search optimisation steps (0: skip)")
+    ap.add_argument("--max-curves", type=int, default=12, help="held-out real curves at most")
+    ap.add_argument("--shapes", default=",".join(("line", "circle", "s_curve", "figure8", "corner")),
+                    help="synthetic curve shapes (comma-separated)")
+    args = ap.parse_args(argv)
+
+    from motiongan_jax import checkpoint, curves, data, evaluation, evaluator, generate
+    from motiongan_jax.bvh import BVHError
+    from motiongan_jax.config import ConfigError
+
+    try:
+        try:
+            seeds = tuple(int(s) for s in args.seeds.split(",") if s.strip())
+        except ValueError:
+            raise ConfigError(f"--seeds must be comma-separated integers, got {args.seeds!r}") from None
+        if not seeds or args.k < 1:
+            raise ConfigError("need at least one seed and --k >= 1")
+        shapes = tuple(s.strip() for s in args.shapes.split(",") if s.strip())
+        bad = [s for s in shapes if s not in curves.SHAPES]
+        if bad:
+            raise ConfigError(f"--shapes: unknown shape(s) {bad}; known: {', '.join(curves.SHAPES)}")
+        settings = evaluation.Settings(seeds=seeds, k=args.k, max_heldout_curves=args.max_curves,
+                                       search_steps=args.search_steps, search_clips=1 if args.search_steps > 0 else 0)
+        report, ctx = evaluation.evaluate_run(args.workdir, settings, shapes, step=args.step, params=args.params,
+                                              data_dir=args.data, evaluator_path=args.evaluator,
+                                              cmu_curves=args.cmu_curves)
+    except (ConfigError, data.DataError, BVHError, checkpoint.CheckpointError, evaluator.EvaluatorError,
+            evaluation.EvaluationError, generate.GenerateError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+    out = Path(args.out)
+    digest = evaluation.write_report(out, report, ctx)
+    print(f"wrote {out / 'report.md'}, report.json, confusion.png, pca_w.png")
+    print(f"evaluator checksum {ctx.ev.checksum[:16]}…, {digest[:12]}")
+    return 0

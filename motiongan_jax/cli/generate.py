@@ -1,0 +1,128 @@
+"""Generate styled walks along a curve with a trained MotionGAN.
+
+  python bin/generate.py --workdir runs/small --style Happy --curve s_curve --out walk.bvh
+  python bin/generate.py --workdir runs/small --style "Sad:0.3,Happy:0.7" --curve path.csv --out walk.gif
+  python bin/generate.py --workdir runs/small --style "OldMan - Normal + Marching" --curve circle --out w.npz
+  python bin/generate.py --workdir runs/small --figure interp --style Sad,Happy --curve line --length 8 --out fig.png
+  python bin/generate.py --workdir runs/small --list-styles
+  python bin/generate.py --style Happy --curve s_curve --out walk.gif     # the shipped model
+
+--workdir: a training run (its latest checkpoint, or --step); --model: an export file
+(bin/export_model.py); neither: the model shipped with the package (motiongan_jax/weights/).
+
+--curve: a shape (line, circle, s_curve, figure8, corner; --scale and --length in metres), a CSV
+or JSON file of x,z points in metres, or a BVH file (its pelvis path, at its own speed).
+--style: a name, a mix "A:0.3,B:0.7" (weights normalised to sum 1), an expression "A - B + C",
+a .npy/.txt file holding a raw w vector, or "random" (from --seed). --z zero (default: w =
+LT(0, label) like the reference's inference), seed (one z from --seed) or K (K samples, K outputs).
+--out by suffix: .bvh (metres, Y up; --bvh-units cm for centimetres; --bvh-hierarchy source,
+the training skeleton's joints, or exact, every bone direction exact through zero-length branch
+joints), .npz (joint positions in metres and metadata), .gif, .mp4 (needs ffmpeg or
+imageio-ffmpeg), .png (pose strips). Several motions: .bvh/.npz get one file each (OUT_0.bvh,
+...), .gif/.mp4/.png show them side by side. The whole curve is walked (up to the limits in
+motiongan_jax/generate.py: 10 km, 36,000 samples); long ones go through G in chunks, with a
+progress line on stderr when that takes more than a few seconds.
+--figure styles|interp|arith: the paper's Fig. 4 (--style "A,B,C" or all styles), Fig. 6
+(--style "A,B": α = 0, 1/4, 1/2, 3/4, 1) and Fig. 7 (--style "A - B + C": operands and result).
+Notes (the curve's sampling, the BVH's best-fit error) go to stderr, written paths to stdout.
+Errors: a message on stderr, exit status 2, and no output file.
+"""
+
+import argparse
+import sys
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+class Progress:
+    """`progress(done, total)` for generate_motion: a line on `stream` (default: sys.stderr as it
+    is when the bar is made, not when this module was imported) per G call, once the generation
+    has run for `delay` seconds (short ones stay quiet)."""
+
+    def __init__(self, stream=None, delay: float = 2.0, clock=None):
+        import time
+
+        self.stream, self.delay, self.clock = stream or sys.stderr, delay, clock or time.monotonic
+        self.t0 = self.clock()
+
+    def __call__(self, done: int, total: int) -> None:
+        elapsed = self.clock() - self.t0
+        if elapsed < self.delay:
+            return
+        eta = elapsed / done * (total - done)
+        bar = "#" * (20 * done // total)
+        print(f"generating [{bar:<20}] {done}/{total} G calls, {elapsed:.0f} s, about {eta:.0f} s left",
+              file=self.stream, flush=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    src = ap.add_mutually_exclusive_group()
+    src.add_argument("--workdir", default=None,
+                     help="a training run's directory (with checkpoints/); default: the shipped model")
+    src.add_argument("--model", default=None, help="an export file (bin/export_model.py) instead of a run")
+    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
+    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
+                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
+    ap.add_argument("--list-styles", action="store_true", help="print the model's style names and exit")
+    ap.add_argument("--style", default=None)
+    ap.add_argument("--curve", default=None)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--length", type=float, default=None, help="shape curves: arc length in metres")
+    ap.add_argument("--scale", type=float, default=2.0, help="shape curves: size in metres (default 2)")
+    ap.add_argument("--speed", type=float, default=None,
+                    help="walking speed in m/s (default 1.2; a BVH curve: its own)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--z", default="zero", help="zero (default), seed, or a number of samples K")
+    ap.add_argument("--figure", choices=("styles", "interp", "arith"), default=None)
+    ap.add_argument("--bvh-units", choices=("m", "cm"), default="m")
+    ap.add_argument("--bvh-hierarchy", choices=("source", "exact"), default="source",
+                    help="source (default): the training skeleton's joints, bones leaving a joint with several "
+                         "children best-fit; exact: every bone direction exact, zero-length branch joints added")
+    args = ap.parse_args(argv)
+
+    from motiongan_jax import checkpoint, curves, generate as gen_lib, pretrained
+    from motiongan_jax.bvh import BVHError
+    from motiongan_jax.ik import IKError
+
+    errors = (gen_lib.GenerateError, checkpoint.CheckpointError, curves.DegenerateCurveError,
+              curves.CurveFileError, BVHError, IKError, OSError)
+    try:
+        if args.list_styles:
+            print("\n".join(pretrained.model_meta(args.workdir, args.step, args.model)["style_names"]))
+            return 0
+        missing = [f"--{n}" for n in ("curve", "out") if getattr(args, n) is None]
+        if args.style is None and args.figure != "styles":
+            missing.insert(0, "--style")
+        if missing:
+            ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
+        gen_lib.check_output_path(args.out)  # fail before the model is loaded
+        z_arg = args.z
+        state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
+        names = list(meta["style_names"])
+        if args.figure:
+            panels = gen_lib.figure_specs(args.figure, args.style, names, args.seed)
+        else:
+            spec = gen_lib.parse_style(args.style, names, args.seed)
+            panels = [(spec.text, spec)]
+        z = gen_lib.z_codes(state, z_arg, args.seed)
+        rate = gen_lib.sample_rate(meta, cfg)
+        curve = gen_lib.load_curve(args.curve, length=args.length, scale=args.scale,
+                                   control_seconds=cfg.data.control_point_interval / float(meta["fps"]))
+        curve_M = gen_lib.prepare_curve(curve, rate, args.speed, log=_log)
+        count = len(panels) * len(z)
+        gen_lib.check_output_size(args.out, len(curve_M), count)  # before any work
+        w = gen_lib.spec_codes(state, [s for _, s in panels], names, z)
+        titles = [t if len(z) == 1 else f"{t} z{k}" for t, _ in panels for k in range(len(z))]
+        zs = [z[k] for _ in panels for k in range(len(z))]
+        generated = gen_lib.generate_motion(state, layout, curve_M, w, progress=Progress())
+        paths = gen_lib.write_outputs(args.out, generated, titles, layout, rate, bvh_units=args.bvh_units,
+                                      bvh_hierarchy=args.bvh_hierarchy, z_per_motion=zs, log=_log)
+    except errors as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    for p in paths:
+        print(p)
+    return 0

@@ -1,0 +1,35 @@
+"""Export BVH files as world joint positions (metres, Y up) in one .npz for your own code.
+
+  python bin/prepare_data.py DATA_DIR --out FILE.npz [--labels paper|bandai|cmu]
+
+Arrays: positions (frames x joints x 3, every joint incl. End Sites, all clips concatenated),
+joint_names, parents, clip_start, clip_length, clip_style, style_names, fps, source_files.
+"""
+
+import argparse
+import sys
+
+from motiongan_jax.bvh import BVHError
+from motiongan_jax.data import DataError
+from motiongan_jax.config import LabelRule, choices
+from motiongan_jax.dataset_export import export_positions
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data_dir")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--labels", choices=choices(LabelRule), default="paper",
+                    help="file-name rule for style labels (also picks the unit: bandai cm, else CMU units)")
+    ap.add_argument("--units-to-m", type=float, default=None, help="metres per file unit (overrides --labels)")
+    ap.add_argument("--skip-bad", action="store_true", help="report malformed files and go on with the rest")
+    args = ap.parse_args(argv)
+    try:
+        info = export_positions(args.data_dir, args.out, args.labels, args.units_to_m, args.skip_bad,
+                                log=lambda s: print(s, file=sys.stderr))
+    except (BVHError, DataError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    print(f"wrote {args.out}: {info['clips']} clips, {info['frames']} frames, {info['joints']} joints, "
+          f"{len(info['styles'])} styles ({', '.join(info['styles'])})")
+    return 0
