@@ -191,8 +191,8 @@ def test_shipped_model_matches_its_checksum_and_generates_finite_walks(repo, shi
     assert _sha256(z, [n for n in z if n != "sha256"]) == shipped.sha256 == str(z["sha256"])
     assert _sha256(z, [n for n in z if n.startswith("g/")]) == shipped.params_sha256
     p = shipped.provenance
-    # provenance: the config as trained (before cpu was renamed small); it loads as the small preset
-    assert p["config_hash"] == config_hash(shipped.meta["config"]) and p["config_name"] == "cpu"
+    # provenance: the config as trained, the small preset's with seed 0
+    assert p["config_hash"] == config_hash(shipped.meta["config"]) and p["config_name"] == "small"
     assert from_dict(shipped.meta["config"]) == override(load_config(repo / "configs" / "small.py"), ["train.seed=0"])
     assert p["params"] == "ema" and p["steps"] > 0 and shipped.meta["data_dir"] is None
     state, meta, cfg, layout = pretrained.state_from_export(shipped)
