@@ -26,17 +26,13 @@ Exit status: 0 done, 2 bad input (no checkpoint, unreadable clip, unwritable OUT
 import argparse
 import sys
 
+from motiongan_jax.cli import add_model_arguments
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    src = ap.add_mutually_exclusive_group()
-    src.add_argument("--workdir", default=None,
-                     help="a training run's directory (with checkpoints/); default: the shipped model")
-    src.add_argument("--model", default=None, help="an export file (bin/export_model.py) instead of a run")
+    add_model_arguments(ap)
     ap.add_argument("--out", required=True, help="output directory (created)")
-    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
-    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
-                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
     ap.add_argument("--k", type=int, default=10, help="codes per style from z ~ N(0, I)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--search", default=None, metavar="CLIP", help="a .bvh clip or an .npz of world positions")

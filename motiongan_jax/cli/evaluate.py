@@ -15,6 +15,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from motiongan_jax.cli import add_checkpoint_arguments
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -25,9 +27,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cmu-curves", default=None, help="directory of BVH files whose root paths are used as curves")
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--k", type=int, default=3, help="noise draws per (curve, style), >= 3 in the protocol")
-    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: latest)")
-    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
-                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
+    add_checkpoint_arguments(ap)
     ap.add_argument("--search-steps", type=int, default=200, help="style-search optimisation steps (0: skip)")
     ap.add_argument("--max-curves", type=int, default=12, help="held-out real curves at most")
     ap.add_argument("--shapes", default=",".join(("line", "circle", "s_curve", "figure8", "corner")),

@@ -17,6 +17,8 @@ import json
 import sys
 from pathlib import Path
 
+from motiongan_jax.cli import add_checkpoint_arguments
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -24,9 +26,7 @@ def main(argv=None) -> int:
     what.add_argument("--workdir", help="a training run's directory (with checkpoints/)")
     what.add_argument("--info", metavar="FILE", help="verify an export and print its provenance")
     ap.add_argument("--out", help="the export file to write (.npz)")
-    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
-    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
-                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
+    add_checkpoint_arguments(ap)
     args = ap.parse_args(argv)
     if args.workdir is not None and not args.out:
         ap.error("--workdir needs --out FILE.npz")

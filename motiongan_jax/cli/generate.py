@@ -31,6 +31,8 @@ Errors: a message on stderr, exit status 2, and no output file.
 import argparse
 import sys
 
+from motiongan_jax.cli import add_model_arguments
+
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
@@ -59,13 +61,7 @@ class Progress:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    src = ap.add_mutually_exclusive_group()
-    src.add_argument("--workdir", default=None,
-                     help="a training run's directory (with checkpoints/); default: the shipped model")
-    src.add_argument("--model", default=None, help="an export file (bin/export_model.py) instead of a run")
-    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
-    ap.add_argument("--params", choices=("ema", "raw"), default="ema",
-                    help="G's parameters: ema (default; the moving average when the run keeps one) or raw")
+    add_model_arguments(ap)
     ap.add_argument("--list-styles", action="store_true", help="print the model's style names and exit")
     ap.add_argument("--style", default=None)
     ap.add_argument("--curve", default=None)

@@ -10,6 +10,8 @@ style (right): the heights of both toes above the floor, the band below the cont
 import argparse
 import sys
 
+from motiongan_jax.cli import add_checkpoint_arguments
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -17,8 +19,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="output image (.png, .pdf, .svg)")
     ap.add_argument("--data", default=None, help="the run's data directory (default: as trained)")
     ap.add_argument("--seconds", type=float, default=6.0, help="length of each trace (default 6)")
-    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: latest)")
-    ap.add_argument("--params", choices=("ema", "raw"), default="ema")
+    add_checkpoint_arguments(ap)
     args = ap.parse_args(argv)
 
     import dataclasses
