@@ -332,7 +332,7 @@ def test_bf16_train_step_keeps_float32_state():
 
 
 def test_step_runs_g_once_and_d_three_times(monkeypatch):
-    """Spec §4.2: one G forward serves both updates (its VJP is kept, G is not re-run for the G
+    """DESIGN.md §4.2: one G forward serves both updates (its VJP is kept, G is not re-run for the G
     update) and D runs three times (fake and real for D, fake for G). Counted while tracing."""
     from test_step import CFG, LAYOUT, C, _batch
 
