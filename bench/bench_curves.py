@@ -14,7 +14,7 @@ import time
 import jax
 import numpy as np
 
-from motiongan_jax import curves
+from motiongan_jax.data import curves
 
 
 def main() -> None:

@@ -5,7 +5,7 @@ The paper's G (top 64, CMU skeleton: 27 joints -> 81 rows, 28 styles), batch 1, 
 Latent Transform included, jitted as generate.py runs it (`step.generator_apply`). Lengths:
 T 128 (one training window), T 1024, and a 2-minute walk in one call (15 samples/s, the paper's
 120 fps / frame step 8: T 1800). Compile time is reported separately from the run time. The
-2-minute path is also timed through `generate.generate_motion` (G + root integration + joint
+2-minute path is also timed through `walk_lib.generate_motion` (G + root integration + joint
 positions + floor contact), the library call behind bin/generate.py.
 
 Reference PyTorch on this machine kind (2 threads, eval, no_grad, latent transform included):
@@ -24,7 +24,9 @@ import jax.numpy as jnp
 
 from bench.bench_train_step import paper_or_small
 from bench.timing import load
-from motiongan_jax import curves, generate, step as step_lib
+from motiongan_jax.data import curves
+from motiongan_jax.generate import walk as walk_lib
+from motiongan_jax.train import inference, state as train_state
 
 REFERENCE_S = {128: 0.084, 1024: 0.62}
 GOAL_S = {128: 0.030, 1024: 0.2}
@@ -47,11 +49,11 @@ def main():
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; paper G, batch 1; {load()}")
     labels = jnp.array([3], jnp.int32)
     for impl in args.impl.split(","):
-        state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
+        state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
         for T in (int(t) for t in args.lengths.split(",")):
             curve = walk(T)
             vel = curves.velocity(curve)
-            fn = jax.jit(step_lib.generator_apply)
+            fn = jax.jit(inference.generator_apply)
             t0 = time.perf_counter()
             compiled = fn.lower(state, vel, labels).compile()
             compile_s = time.perf_counter() - t0
@@ -70,14 +72,14 @@ def main():
                   f"{med * 1e3:7.1f} ms (min {min(times) * 1e3:.1f}, {args.repeats} runs); compile "
                   f"{compile_s:.1f} s; XLA counts {gflop:.1f} GFLOP{ref}   ({load()})", flush=True)
             if T == 120 * SAMPLES_PER_S:
-                w = step_lib.latent_w(state, labels)
-                generate.generate_motion(state, layout, curve[0], w)  # compiles generate's own jit
+                w = inference.latent_w(state, labels)
+                walk_lib.generate_motion(state, layout, curve[0], w)  # compiles generate's own jit
                 times = []
                 for _ in range(max(3, args.repeats // 2)):
                     t0 = time.perf_counter()
-                    generate.generate_motion(state, layout, curve[0], w)
+                    walk_lib.generate_motion(state, layout, curve[0], w)
                     times.append(time.perf_counter() - t0)
-                print(f"  [{impl}] generate.generate_motion, 2-minute walk (T {T}), one call: median "
+                print(f"  [{impl}] walk_lib.generate_motion, 2-minute walk (T {T}), one call: median "
                       f"{statistics.median(times) * 1e3:.1f} ms   ({load()})", flush=True)
 
 

@@ -29,9 +29,10 @@ import jax
 
 from bench.bench_data import long_clips
 from bench.timing import load, median_time
-from motiongan_jax import data, step as step_lib
+from motiongan_jax.data import dataset as data
+from motiongan_jax.train import state as train_state, step as step_lib_lib
 from motiongan_jax.config import load_config, override
-from motiongan_jax.train import make_step_fn
+from motiongan_jax.train.loop import make_step_fn
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
@@ -49,7 +50,7 @@ def setup(which: str):
                         "data.window_stride=3"])
         clips, styles = long_clips()
         layout = clips[0].layout
-        step_fn = step_lib.make_train_step(cfg, layout, len(styles))
+        step_fn = step_lib_lib.make_train_step(cfg, layout, len(styles))
     return cfg, data.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles), step_fn
 
 
@@ -86,7 +87,7 @@ def main():
 
         fused = jax.jit(fused_fn, donate_argnums=(0, 1))
         sample_s = median_time(sample, arrays, k_data, 0, repeats=20)
-        holder = {"state": step_lib.init_state(cfg, layout, num_styles, jax.random.key(0)), "s": 0}
+        holder = {"state": train_state.init_state(cfg, layout, num_styles, jax.random.key(0)), "s": 0}
         fixed_batch = sample(arrays, k_data, 0)
 
         def run(n, step_once):

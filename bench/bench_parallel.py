@@ -34,8 +34,10 @@ def child(args) -> None:
     if args.num_processes > 1:
         jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
     from bench.timing import load
-    from motiongan_jax import data, parallel, step as step_lib
-    from motiongan_jax.train import make_step_fn
+    from motiongan_jax.data import dataset as data
+    from motiongan_jax.train import parallel
+    from motiongan_jax.train import state as train_state
+    from motiongan_jax.train.loop import make_step_fn
     from motiongan_jax.config import load_config, override
 
     cfg = override(load_config(ROOT / "configs" / f"{args.which}.py"), args.set)
@@ -48,7 +50,7 @@ def child(args) -> None:
         return step_fn(state, batch, jax.random.fold_in(key, s))
 
     sample = jax.jit(data.make_sample_batch(cfg.data, B))
-    state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, jax.random.key(0))
+    state = train_state.init_state(cfg, dataset.layout, dataset.num_styles, jax.random.key(0))
     k_data, key = jax.random.key(1), jax.random.key(2)
     if jax.device_count() > 1:
         mesh = parallel.data_mesh()

@@ -35,10 +35,11 @@ from flax import nnx
 
 from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small, stand_in_gait
 from bench.timing import load, median_time
-from motiongan_jax import curves, step as step_lib
+from motiongan_jax.data import curves
+from motiongan_jax.train import objectives, state as train_state
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.nn.generator import Generator
-from motiongan_jax.representation import LENGTH_UNIT_M
+from motiongan_jax.motion.representation import LENGTH_UNIT_M
 
 SCOPES = Generator.BLOCKS + ("heads", "D")
 
@@ -46,8 +47,8 @@ SCOPES = Generator.BLOCKS + ("heads", "D")
 def pieces(cfg, layout, num_styles, state, batch, repeats):
     """Seconds of each part of the step, jitted on its own."""
     tcfg = cfg.train
-    labels, z = step_lib.sample_labels_and_z(cfg, num_styles, batch["curve_BxTx3"].shape[0], jax.random.key(5))
-    phase = step_lib.sample_phase(cfg, batch["curve_BxTx3"].shape[0], jax.random.key(5))
+    labels, z = objectives.sample_labels_and_z(cfg, num_styles, batch["curve_BxTx3"].shape[0], jax.random.key(5))
+    phase = objectives.sample_phase(cfg, batch["curve_BxTx3"].shape[0], jax.random.key(5))
     gait = stand_in_gait(cfg, layout, num_styles)
     curve_vel = curves.velocity(batch["curve_BxTx3"])
     real_vel = curves.velocity(batch["root_BxTx3"])
@@ -68,18 +69,18 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
     def d_update(d_params, sn, opt_d, fake):
         def obj(p):
             d = nnx.merge(state.d_def, p, sn, copy=True)
-            terms = step_lib.d_losses(d, *fake, real_vel, batch["pose_BxTxR"], batch["label_B"], tcfg)
+            terms = objectives.d_losses(d, *fake, real_vel, batch["pose_BxTxR"], batch["label_B"], tcfg)
             return terms["d_total"], nnx.state(d, SpectralNormState)
 
         (_, sn), grads = jax.value_and_grad(obj, has_aux=True)(d_params)
-        tx_d = step_lib.optimizers(cfg)[1]
+        tx_d = train_state.optimizers(cfg)[1]
         upd, opt_d = tx_d.update(grads, opt_d, d_params)
         return optax.apply_updates(d_params, upd), sn, opt_d
 
     def g_loss_grad(d_params, sn, fake):
         def obj(f):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
-            terms = step_lib.g_losses(d, *f, labels, batch["curve_BxTx3"], bone_pairs, bone_lengths, tcfg,
+            terms = objectives.g_losses(d, *f, labels, batch["curve_BxTx3"], bone_pairs, bone_lengths, tcfg,
                                       LENGTH_UNIT_M, gait=gait, real_vel_BxTx3=real_vel,
                                       log_stride_B=jnp.zeros(labels.shape))
             return terms["g_total"]
@@ -152,7 +153,7 @@ def main():
     cfg, layout, num_styles = paper_or_small(args.which)
     B, T = cfg.train.batch_size, cfg.data.window_T
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {args.which}: B {B}, T {T}, impl {args.impl}; {load()}")
-    state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=args.impl)
+    state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=args.impl)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
 
     if not args.no_pieces:

@@ -28,9 +28,10 @@ import jax
 import jax.numpy as jnp
 
 from bench.timing import load
-from motiongan_jax import data, step as step_lib, synthetic
+from motiongan_jax.data import dataset as data, synthetic
+from motiongan_jax.train import state as train_state, step as step_lib_lib
 from motiongan_jax.config import load_config, override
-from motiongan_jax.representation import CMU_UNIT_M, layout_from_skeleton
+from motiongan_jax.motion.representation import CMU_UNIT_M, layout_from_skeleton
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 REFERENCE_STEP_S = 8.57
@@ -49,14 +50,14 @@ def paper_or_small(which: str):
 def stand_in_gait(cfg, layout, num_styles):
     """Gait targets of the right kind for configs with gait terms (their values do not change
     the step's cost), else None."""
-    if not step_lib.needs_gait_targets(cfg.train):
+    if not step_lib_lib.needs_gait_targets(cfg.train):
         return None
     return data.GaitTargets((1.2,) * num_styles, 0.02, data.foot_joints(layout))
 
 
 def bench_step_fn(cfg, layout, num_styles):
     """The pure train step of `cfg` on fake data (fake_batch)."""
-    return step_lib.make_train_step(cfg, layout, num_styles, stand_in_gait(cfg, layout, num_styles))
+    return step_lib_lib.make_train_step(cfg, layout, num_styles, stand_in_gait(cfg, layout, num_styles))
 
 
 def fake_batch(B, T, R, num_styles, key):
@@ -83,7 +84,7 @@ def peak_device_memory() -> str:
 
 def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
     B, T = cfg.train.batch_size, cfg.data.window_T
-    state = step_lib.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
+    state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
     step_fn = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
     t0 = time.perf_counter()

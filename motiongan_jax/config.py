@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
-from motiongan_jax.representation import LENGTH_UNIT_M
+from motiongan_jax.motion.representation import LENGTH_UNIT_M
 
 LabelRule = Literal["paper", "bandai", "bandai_session", "cmu", "synthetic"]
 LatentInit = Literal["paper", "torch_default"]
@@ -383,7 +383,7 @@ def paper() -> Config:
     """Exactly the paper: CMU styled walks (subjects 137 and 142), 28 styles, B 24, T 128, 200k
     steps. The CMU trials are not shipped (pass --data DIR, files named like 137_04.bvh); far too
     slow for a CPU (~8.6 s per step on 2 cores): run it on a GPU."""
-    from motiongan_jax.data import PAPER_STYLES  # data imports jax: only when this preset is asked for
+    from motiongan_jax.data.dataset import PAPER_STYLES  # data imports jax: only when this preset is asked for
 
     return Config(
         name="paper",

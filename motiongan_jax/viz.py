@@ -69,7 +69,7 @@ def _bone_colors(parents, joint_names) -> list[str]:
     RIGHT_COLOR, the trunk dark grey; without names every bone is dark grey."""
     if joint_names is None:
         return ["0.25"] * len(_bones(parents))
-    from motiongan_jax.representation import joint_side
+    from motiongan_jax.motion.representation import joint_side
 
     side = {"left": LEFT_COLOR, "right": RIGHT_COLOR}
     return [side.get(joint_side(joint_names[c]), "0.25") for _, c in _bones(parents)]

@@ -87,14 +87,16 @@ def random_run(cfg, wd, step: int = 4, seed: int = 0, data_dir: str = "<test>"):
     import jax
     import numpy as np
 
-    from motiongan_jax import checkpoint, representation, synthetic
-    from motiongan_jax import step as step_lib
-    from motiongan_jax import train as train_lib
+    from motiongan_jax.train import checkpoint
+    from motiongan_jax.motion import representation
+    from motiongan_jax.data import synthetic
+    from motiongan_jax.train import state as train_state
+    from motiongan_jax.train import loop as train_lib
 
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     styles = tuple(sorted(synthetic.STYLES))
     dataset = types.SimpleNamespace(style_names=styles, layout=layout, fps=60.0, data_dir=data_dir)
-    like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(styles), jax.random.key(0)))
+    like = jax.eval_shape(lambda: train_state.init_state(cfg, layout, len(styles), jax.random.key(0)))
     rng = np.random.default_rng(seed)
     state = jax.tree.map(lambda s: rng.normal(0, 0.3, s.shape).astype(s.dtype)
                          if np.issubdtype(s.dtype, np.floating) else np.zeros(s.shape, s.dtype), like)
@@ -152,7 +154,7 @@ def tiny_cfg():
 def trained_tiny(tiny_cfg, tmp_path_factory):
     """The tiny config trained for its 4 steps without interruption (seed 0): the reference of the
     training tests and the model of the analysis tests. Read only."""
-    from motiongan_jax import train as train_lib
+    from motiongan_jax.train import loop as train_lib
 
     path = _build_once(tmp_path_factory, "trained_tiny",
                        lambda wd: train_lib.train(tiny_cfg, wd, progress=False, log=lambda s: None))
@@ -164,7 +166,7 @@ def trained_tiny(tiny_cfg, tmp_path_factory):
 def random_tiny(tiny_cfg, tmp_path_factory):
     """The tiny config's G and D with seeded random parameters, as a checkpoint at step 4 of a run
     on the embedded dataset: checkpoints/ alone (what generation reads). Read only."""
-    from motiongan_jax import data
+    from motiongan_jax.data import dataset as data
 
     def build(wd):
         random_run(tiny_cfg, wd, data_dir=str(data.resolve_data_dir(tiny_cfg.data)))

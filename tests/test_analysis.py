@@ -1,4 +1,4 @@
-"""Style-space analysis and style search (motiongan_jax/analysis.py, bin/analyze.py)."""
+"""Style-space analysis and style search (motiongan_jax/analysis/, bin/analyze.py)."""
 
 import json
 from pathlib import Path
@@ -10,9 +10,17 @@ import numpy as np
 import pytest
 
 from conftest import load_cli
-from motiongan_jax import analysis as A
-from motiongan_jax import bvh, checkpoint, curves, kinematics, representation, synthetic
-from motiongan_jax import generate as gen
+from motiongan_jax.analysis import (
+    adain as adain_lib,
+    clips,
+    probe as probe_lib,
+    search as search_lib,
+    style_space,
+)
+from motiongan_jax.motion import bvh, kinematics, representation
+from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.data import curves, synthetic
+from motiongan_jax.generate import styles as styles_lib, walk
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +37,7 @@ def test_pca_matches_numpy_svd():
     rng = np.random.default_rng(0)
     X = rng.normal(size=(40, 6)) * np.array([5.0, 3.0, 2.0, 1.0, 0.5, 0.1]) @ np.linalg.qr(
         rng.normal(size=(6, 6)))[0] + 3.0
-    p = A.pca(X)
+    p = style_space.pca(X)
     chex.assert_shape([p.components_KxD], (6, 6))
     chex.assert_shape([p.mean_D, p.explained_variance_ratio_K, p.singular_values_K], (6,))
     Xc = X - X.mean(0)
@@ -44,42 +52,42 @@ def test_pca_matches_numpy_svd():
     assert np.all(comps[np.arange(6), np.argmax(np.abs(comps), 1)] > 0)
     assert abs(float(np.sum(p.explained_variance_ratio_K)) - 1) < 1e-5
     # projection and exact reconstruction with every component
-    Z = np.asarray(A.pca_transform(p, X))
+    Z = np.asarray(style_space.pca_transform(p, X))
     np.testing.assert_allclose(Z @ comps + np.asarray(p.mean_D), X, atol=1e-4)
     np.testing.assert_allclose(Z.var(0, ddof=1), np.asarray(p.explained_variance_K), rtol=1e-3)
-    two = A.pca(X, 2)
+    two = style_space.pca(X, 2)
     chex.assert_shape(two.components_KxD, (2, 6))
     assert float(np.sum(two.explained_variance_ratio_K)) < 1.0
     np.testing.assert_allclose(np.asarray(two.components_KxD), comps[:2], atol=1e-6)
     with pytest.raises(ValueError, match="num_components"):
-        A.pca(X, 7)
+        style_space.pca(X, 7)
 
 
 def test_nearest_styles_on_hand_made_points():
     # on a line: A 0, B 1, C 3, D 7, E -0.5
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [3.0, 0.0], [7.0, 0.0], [-0.5, 0.0]])
     names = ["A", "B", "C", "D", "E"]
-    d = A.pairwise_distances(pts)
+    d = style_space.pairwise_distances(pts)
     np.testing.assert_allclose(np.asarray(d), np.abs(pts[:, None, 0] - pts[None, :, 0]), atol=1e-6)
-    near = A.nearest_styles(d, names, k=3)
+    near = style_space.nearest_styles(d, names, k=3)
     got = {r["style"]: [n for n, _ in r["nearest"]] for r in near}
     assert got == {"A": ["E", "B", "C"], "B": ["A", "E", "C"], "C": ["B", "A", "E"],
                    "D": ["C", "B", "A"], "E": ["A", "B", "C"]}
     assert near[3]["nearest"][0][1] == pytest.approx(4.0)
-    md = A.nearest_markdown(near)
+    md = style_space.nearest_markdown(near)
     assert "| style | 1st | 2nd | 3rd |" in md and "| D | C (4) | B (6) | A (7) |" in md
     assert len([line for line in md.splitlines() if line.startswith("| ")]) == 1 + len(names)
 
 
 def test_interpolate_mix_arithmetic_by_hand():
     a, b, c = jnp.array([1.0, 2.0]), jnp.array([3.0, -2.0]), jnp.array([0.5, 0.5])
-    np.testing.assert_allclose(A.interpolate(a, b, 0.25), [1.5, 1.0])
-    np.testing.assert_allclose(A.interpolate(a, b, jnp.array([0.0, 1.0])), [[1.0, 2.0], [3.0, -2.0]])
-    np.testing.assert_allclose(A.mix(jnp.stack([a, b, c]), [0.5, 0.25, 0.25]), [1.375, 0.625])
-    np.testing.assert_allclose(A.mix(jnp.stack([a, b]), [1.0, 3.0], normalize=True), [2.5, -1.0])
-    np.testing.assert_allclose(A.arithmetic([("+", a), ("-", b), (1, c)]), [-1.5, 4.5])
+    np.testing.assert_allclose(style_space.interpolate(a, b, 0.25), [1.5, 1.0])
+    np.testing.assert_allclose(style_space.interpolate(a, b, jnp.array([0.0, 1.0])), [[1.0, 2.0], [3.0, -2.0]])
+    np.testing.assert_allclose(style_space.mix(jnp.stack([a, b, c]), [0.5, 0.25, 0.25]), [1.375, 0.625])
+    np.testing.assert_allclose(style_space.mix(jnp.stack([a, b]), [1.0, 3.0], normalize=True), [2.5, -1.0])
+    np.testing.assert_allclose(style_space.arithmetic([("+", a), ("-", b), (1, c)]), [-1.5, 4.5])
     with pytest.raises(ValueError):
-        A.arithmetic([(2, a)])
+        style_space.arithmetic([(2, a)])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -91,14 +99,14 @@ def test_probe_recovers_a_linear_map_and_not_noise():
     X = rng.normal(size=(120, 6))
     M, c = rng.normal(size=(6, 3)), np.array([1.0, -2.0, 0.5])
     Y = X @ M + c
-    res = A.linear_probe(X, Y, folds=5)
+    res = probe_lib.linear_probe(X, Y, folds=5)
     chex.assert_shape(res.pred_NxP, (120, 3))
     np.testing.assert_allclose(res.r2_P, 1.0, atol=1e-4)
     np.testing.assert_allclose(res.pred_NxP, Y, atol=1e-3)
     # grouped (leave-one-group-out), on raw codes
     groups = np.repeat(np.arange(8), 15)
-    np.testing.assert_allclose(A.linear_probe(X, Y, groups_N=groups, components=None).r2_P, 1.0, atol=1e-4)
-    noise = A.linear_probe(X, rng.normal(size=(120, 2)), folds=5)
+    np.testing.assert_allclose(probe_lib.linear_probe(X, Y, groups_N=groups, components=None).r2_P, 1.0, atol=1e-4)
+    noise = probe_lib.linear_probe(X, rng.normal(size=(120, 2)), folds=5)
     assert np.all(noise.r2_P < 0.1) and np.all(noise.r2_P > -0.3), noise.r2_P
 
 
@@ -109,25 +117,25 @@ def test_probe_recovers_a_linear_map_and_not_noise():
 def test_style_codes_and_gait_parameters(run):
     _, state, meta, cfg, _ = run
     names = meta["style_names"]
-    codes = A.label_codes(state, names, k=3, key=jax.random.key(2))
+    codes = style_space.label_codes(state, names, k=3, key=jax.random.key(2))
     W = cfg.model.w_dim
     chex.assert_shape(codes.zero_CxD, (len(names), W))
     chex.assert_shape(codes.samples_CxKxD, (len(names), 3, W))
     labels = jnp.arange(len(names))
-    np.testing.assert_allclose(codes.zero_CxD, A.step_lib.generator(state).style(
+    np.testing.assert_allclose(codes.zero_CxD, inference.generator(state).style(
         labels, jnp.zeros((len(names), cfg.model.z_dim))), rtol=1e-5, atol=1e-9)
     z = jax.random.normal(jax.random.key(5), (len(names), cfg.model.z_dim))
-    w = gen.latent_codes(state, labels, z)
+    w = styles_lib.latent_codes(state, labels, z)
     chex.assert_shape(w, (len(names), W))
-    np.testing.assert_allclose(w, A.step_lib.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(w, inference.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
     assert not np.allclose(w, codes.zero_CxD)  # z reaches w
-    gait = A.gait_parameters(meta, cfg)
+    gait = probe_lib.gait_parameters(meta, cfg)
     assert gait["param_names"] == list(synthetic.PARAM_NAMES) + ["speed"]
     want = [[getattr(synthetic.STYLES[s], n) for n in synthetic.PARAM_NAMES] + [synthetic.STYLES[s].speed]
             for s in names]
     np.testing.assert_allclose(gait["style_YxP"], want)
     assert len(gait["clips"]) == 5 * len(names)
-    report = A.probe_report(codes, gait)
+    report = probe_lib.probe_report(codes, gait)
     assert set(report["per_style"]["r2_cv"]) == set(synthetic.PARAM_NAMES) | {"speed"}
     assert report["per_sample"]["points"] == 3 * len(names)
 
@@ -139,30 +147,30 @@ def test_w_blend_equals_adain_blend(run):
     vel = np.asarray(curves.velocity(curve))
     # codes far apart (|w| ~ 1, not the ~1e-5 codes of a 4-step model), so that they matter
     ws = jax.random.normal(jax.random.key(1), (3, W))
-    by_w_fn = lambda w: gen.apply_code(state, vel, w)  # noqa: E731
-    adain_fn = jax.jit(A.generator_apply_adain)
+    by_w_fn = lambda w: walk.apply_code(state, vel, w)  # noqa: E731
+    adain_fn = jax.jit(adain_lib.generator_apply_adain)
     by_adain_fn = lambda adain: adain_fn(state, vel, adain)  # noqa: E731
     outs = [by_w_fn(ws[i:i + 1]) for i in range(3)]
     scale = float(jnp.abs(outs[0][1]).mean())
     assert float(jnp.abs(outs[0][1] - outs[1][1]).max()) > 0.05 * scale  # the codes change the output
-    styles = [jax.jit(A.adain_styles)(state, ws[i:i + 1]) for i in range(3)]
+    styles = [jax.jit(adain_lib.adain_styles)(state, ws[i:i + 1]) for i in range(3)]
     chex.assert_shape(styles[0]["ec0_0"][0], (1, cfg.model.top))
     # the override path itself reproduces G exactly
     np.testing.assert_allclose(by_adain_fn(styles[0])[1], outs[0][1], atol=1e-6)
     for weights in ([0.2, 0.5, 0.3], [1.5, -0.25, -0.25]):  # sums to 1, incl. extrapolation
-        by_w = by_w_fn(A.mix(ws, weights)[None])
-        by_adain = by_adain_fn(A.blend_adain(styles, weights))
+        by_w = by_w_fn(style_space.mix(ws, weights)[None])
+        by_adain = by_adain_fn(adain_lib.blend_adain(styles, weights))
         for x, y in zip(by_w, by_adain):
             chex.assert_equal_shape([x, y])
             np.testing.assert_allclose(x, y, atol=2e-5, rtol=1e-4)
     # weights that do not sum to 1: the AdaIN biases a_s, a_b are counted twice, outputs differ
-    by_w = by_w_fn(A.mix(ws, [1.0, 1.0, 0.0])[None])
-    by_adain = by_adain_fn(A.blend_adain(styles, [1.0, 1.0, 0.0]))
+    by_w = by_w_fn(style_space.mix(ws, [1.0, 1.0, 0.0])[None])
+    by_adain = by_adain_fn(adain_lib.blend_adain(styles, [1.0, 1.0, 0.0]))
     assert float(jnp.abs(by_w[1] - by_adain[1]).max()) > 0.01 * scale
 
 
 def test_search_schedule_warms_up_below_the_peak():
-    sched = A.search_schedule(0.1, 100, 10)
+    sched = search_lib.search_schedule(0.1, 100, 10)
     lrs = np.array([float(sched(i)) for i in range(100)])
     assert lrs[0] == pytest.approx(0.01) and lrs[0] < 0.1
     assert np.all(np.diff(lrs[:10]) > 0) and lrs[9] == pytest.approx(0.1) and lrs[10] == pytest.approx(0.1)
@@ -173,7 +181,7 @@ def test_motion_windows_are_aligned_and_npz_matches_bvh(run, tmp_path):
     _, state, meta, cfg, layout = run
     clip = Path(meta["data_dir"]) / f"{meta['style_names'][0]}_01.bvh"
     T, step = cfg.data.window_T, cfg.data.frame_step
-    win = A.motion_windows(clip, meta, cfg, layout, max_windows=3)
+    win = clips.motion_windows(clip, meta, cfg, layout, max_windows=3)
     chex.assert_shape([win.root_NxTx3, win.curve_NxTx3], (3, T, 3))
     chex.assert_shape(win.pose_NxTxR, (3, T, layout.num_rows))
     assert win.frame_step == step and list(win.start_frames) == [0, T * step, 2 * T * step]
@@ -186,16 +194,16 @@ def test_motion_windows_are_aligned_and_npz_matches_bvh(run, tmp_path):
     motion = bvh.read_bvh(clip)
     pos = kinematics.world_positions(motion)[cfg.data.start_offset:] * representation.UNITS_TO_M["synthetic"]
     np.savez(tmp_path / "clip.npz", positions=pos, joint_names=np.array(motion.skeleton.names), fps=motion.fps)
-    win2 = A.motion_windows(tmp_path / "clip.npz", meta, cfg, layout, max_windows=3)
+    win2 = clips.motion_windows(tmp_path / "clip.npz", meta, cfg, layout, max_windows=3)
     np.testing.assert_allclose(win2.pose_NxTxR, win.pose_NxTxR, atol=1e-5)
     np.testing.assert_allclose(win2.curve_NxTx3, win.curve_NxTx3, atol=1e-4)
     # a 2x frame rate doubles the frame step and keeps the windows' duration
     np.savez(tmp_path / "fast.npz", positions=np.repeat(pos, 2, axis=0), joint_names=np.array(motion.skeleton.names),
              fps=2 * motion.fps)
-    assert A.motion_windows(tmp_path / "fast.npz", meta, cfg, layout, max_windows=1).frame_step == 2 * step
-    with pytest.raises(A.AnalysisError, match="joints"):
+    assert clips.motion_windows(tmp_path / "fast.npz", meta, cfg, layout, max_windows=1).frame_step == 2 * step
+    with pytest.raises(style_space.AnalysisError, match="joints"):
         np.savez(tmp_path / "bad.npz", positions=pos[:, :5])
-        A.motion_windows(tmp_path / "bad.npz", meta, cfg, layout)
+        clips.motion_windows(tmp_path / "bad.npz", meta, cfg, layout)
 
 
 def test_style_search_recovers_a_known_w(run):
@@ -207,19 +215,19 @@ def test_style_search_recovers_a_known_w(run):
     _, state, meta, cfg, layout = run
     T, N = 64, 1
     curve = jnp.cumsum(jax.random.normal(jax.random.key(3), (N, T, 3)).at[..., 1].set(0), axis=1)
-    codes = A.label_codes(state, meta["style_names"], k=3)
+    codes = style_space.label_codes(state, meta["style_names"], k=3)
     direction = jax.random.normal(jax.random.key(5), (cfg.model.w_dim,))
     w_true = codes.centroids_CxD[0] + 0.3 * direction / jnp.linalg.norm(direction)
-    probe = A.MotionWindows(curve, jnp.zeros((N, T, layout.num_rows)), curve, np.zeros(N, int), 1)
-    rv, pose = A.reconstruct(state, probe, w_true)
-    target = A.MotionWindows(curves.integrate(curve[:, 0], rv), pose, curve, np.zeros(N, int), 1)
+    probe = clips.MotionWindows(curve, jnp.zeros((N, T, layout.num_rows)), curve, np.zeros(N, int), 1)
+    rv, pose = search_lib.reconstruct(state, probe, w_true)
+    target = clips.MotionWindows(curves.integrate(curve[:, 0], rv), pose, curve, np.zeros(N, int), 1)
     before = jax.tree.map(np.array, state.g_params)
-    res = A.style_search(state, target, codes.centroids_CxD[1:3], ["a", "b"], steps=100, lr=0.02)
+    res = search_lib.style_search(state, target, codes.centroids_CxD[1:3], ["a", "b"], steps=100, lr=0.02)
     chex.assert_shape(res.w_SxD, (2, cfg.model.w_dim))
     assert res.initial_loss_S.min() > 1e-5  # the starts are far from the target
     assert res.loss < 1e-6 * res.initial_loss_S.min(), (res.initial_loss_S, res.final_loss_S)
     np.testing.assert_allclose(res.w_D, w_true, atol=1e-3)
-    got = A.reconstruct(state, target, res.w_D)
+    got = search_lib.reconstruct(state, target, res.w_D)
     np.testing.assert_allclose(got[1], pose, atol=1e-4)
     assert res.history_HxS.shape == (10, 2) and res.history_HxS[0, 0] == pytest.approx(res.initial_loss_S[0])
     jax.tree.map(np.testing.assert_array_equal, before, jax.tree.map(np.array, state.g_params))

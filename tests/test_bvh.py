@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from expected import CMU_NAMES
-from motiongan_jax import bvh
-from motiongan_jax.bvh import BVHError, parse_bvh, read_bvh, read_bvh_dir, write_bvh
+from motiongan_jax.motion import bvh
+from motiongan_jax.motion.bvh import BVHError, parse_bvh, read_bvh, read_bvh_dir, write_bvh
 
 # A small hand-written file: mixed channel orders, 3- and 6-channel joints, position channels
 # after rotations, exponent notation, two End Sites. 6 + 3 + 6 + 3 = 18 channels.

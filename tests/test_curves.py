@@ -12,8 +12,8 @@ from absl.testing import parameterized
 from scipy.integrate import quad
 from scipy.interpolate import CubicSpline, interp1d
 
-from motiongan_jax import curves
-from motiongan_jax.curves import DegenerateCurveError, CurveFileError
+from motiongan_jax.data import curves
+from motiongan_jax.data.curves import DegenerateCurveError, CurveFileError
 
 I = 16  # small control-point interval keeps every test tiny
 
@@ -433,7 +433,7 @@ def test_missing_file_and_root_positions(tmp_path):
 def test_window_frame_turns_the_travel_to_plus_z_and_ignores_the_first_velocity():
     """By hand: travel along +x (heading pi/2) is turned to +z, and a pose row along +x with it;
     v[0] (a copy of v[1] in `velocity`) does not enter the heading; a still window is unturned."""
-    from motiongan_jax.curves import window_frame
+    from motiongan_jax.data.curves import window_frame
 
     T = 8
     v_x = jnp.zeros((1, T, 3)).at[..., 0].set(0.1).at[0, 0].set(jnp.array([0.0, 0.0, -5.0]))

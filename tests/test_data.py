@@ -9,10 +9,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from motiongan_jax import data
+from motiongan_jax.data import dataset as data
 from motiongan_jax.config import DataConfig
-from motiongan_jax.data import Clip, FileLabel, build_arrays, label_from_filename, make_sample_batch
-from motiongan_jax.representation import RowLayout
+from motiongan_jax.data.dataset import Clip, FileLabel, build_arrays, label_from_filename, make_sample_batch
+from motiongan_jax.motion.representation import RowLayout
 
 # ---------------------------------------------------------------------------------------------
 # labels, discovery, splits
@@ -258,7 +258,7 @@ def test_gait_statistics_recover_the_embedded_styles(repo):
     gait parameters each clip was generated with (its styles.json entry)."""
     import json
 
-    from motiongan_jax import representation
+    from motiongan_jax.motion import representation
     from motiongan_jax.config import load_config
 
     cfg = load_config(repo / "configs" / "tiny.py").data

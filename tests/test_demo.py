@@ -18,8 +18,10 @@ import pytest
 
 pytest.importorskip("flask")
 
-from motiongan_jax import bvh, checkpoint, curves  # noqa: E402
-from motiongan_jax import generate as gen  # noqa: E402
+from motiongan_jax.motion import bvh  # noqa: E402
+from motiongan_jax.train import checkpoint  # noqa: E402
+from motiongan_jax.data import curves  # noqa: E402
+from motiongan_jax.generate import limits, styles as styles_lib, user_curves, walk, writers
 from motiongan_jax.demo import engine as E  # noqa: E402
 from motiongan_jax.demo import server  # noqa: E402
 
@@ -56,10 +58,10 @@ def _arc(T):
 
 def _direct(engine, points, styles, z="zero", seed=0):
     """What bin/generate.py's steps give for the same request, without the demo."""
-    curve = gen.prepare_curve(gen.Curve(np.asarray(points, float), "path"), RATE, SPEED)
-    specs = [gen.parse_style(s, engine.style_names, seed) for s in styles]
-    w = gen.spec_codes(engine.state, specs, engine.style_names, gen.z_codes(engine.state, z, seed))
-    return gen.generate_motion(engine.state, engine.layout, curve, w), specs
+    curve = user_curves.prepare_curve(user_curves.Curve(np.asarray(points, float), "path"), RATE, SPEED)
+    specs = [styles_lib.parse_style(s, engine.style_names, seed) for s in styles]
+    w = styles_lib.spec_codes(engine.state, specs, engine.style_names, styles_lib.z_codes(engine.state, z, seed))
+    return walk.generate_motion(engine.state, engine.layout, curve, w), specs
 
 
 def _post(client, path, body):
@@ -103,10 +105,10 @@ def test_generate_at_a_bucket_size_is_what_generate_py_makes(client, engine):
 def test_a_new_length_in_a_bucket_does_not_compile_again(engine):
     base = E.parse_request({"points": _line(48), "styles": ["Happy"], "speed": SPEED})
     engine.run(base)
-    compiled = gen._apply_g._cache_size()
+    compiled = walk._apply_g._cache_size()
     res = engine.run(E.parse_request({"points": _line(40), "styles": ["Sad"], "speed": SPEED}))
     assert res.generated.positions.shape[1] == 40 and res.samples_bucket == 48  # padded to 48
-    assert gen._apply_g._cache_size() == compiled
+    assert walk._apply_g._cache_size() == compiled
 
 
 def test_padding_keeps_the_motion_on_its_curve_and_its_feet_on_the_floor(engine):
@@ -115,7 +117,7 @@ def test_padding_keeps_the_motion_on_its_curve_and_its_feet_on_the_floor(engine)
     chex.assert_shape(g.positions, (2, 40, len(engine.layout.joint_names), 3))
     chex.assert_shape(g.curve, (40, 3))
     lowest = g.positions[..., 1].min(axis=-1)
-    np.testing.assert_allclose(np.percentile(lowest, gen.FLOOR_PERCENTILE, axis=-1), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.percentile(lowest, walk.FLOOR_PERCENTILE, axis=-1), 0.0, atol=1e-9)
     # a padded batch gives each motion what it gets alone (G treats motions independently), up to
     # float rounding in programs compiled for another batch size
     alone = engine.run(E.parse_request({"points": _arc(40), "styles": ["Happy"], "speed": SPEED})).generated
@@ -135,8 +137,8 @@ def test_z_samples_and_seeds(client):
 
 
 def _style_error(text, names):
-    with pytest.raises(gen.StyleError) as e:
-        gen.parse_style(text, names)
+    with pytest.raises(styles_lib.StyleError) as e:
+        styles_lib.parse_style(text, names)
     return str(e.value)
 
 
@@ -197,18 +199,18 @@ def test_the_demo_limits_lie_inside_generates_which_apply_too(client, monkeypatc
     """generate.py's limits are the one definition every entry point applies; the demo's own are
     an interactive page's and lie inside them. A path within the demo's but beyond a (lowered)
     generate limit is a 400 with generate's message, before G runs."""
-    assert E.MAX_PATH_M <= gen.MAX_CURVE_LENGTH_M and E.MAX_POINTS <= gen.MAX_CURVE_POINTS
-    assert E.MAX_MOTIONS * E.SAMPLE_BUCKETS[-1] <= min(gen.MAX_TOTAL_SAMPLES, gen.BATCH_SAMPLES)  # one G call
-    assert E.MAX_MOTIONS * E.GIF_MAX_FRAMES <= gen.MAX_GIF_FRAMES
+    assert E.MAX_PATH_M <= limits.MAX_CURVE_LENGTH_M and E.MAX_POINTS <= limits.MAX_CURVE_POINTS
+    assert E.MAX_MOTIONS * E.SAMPLE_BUCKETS[-1] <= min(limits.MAX_TOTAL_SAMPLES, walk.BATCH_SAMPLES)  # one G call
+    assert E.MAX_MOTIONS * E.GIF_MAX_FRAMES <= limits.MAX_GIF_FRAMES
 
     def no_g(*args):
         raise AssertionError("G ran")
 
-    monkeypatch.setattr(gen, "_apply_g", no_g)
-    monkeypatch.setattr(gen, "MAX_CURVE_LENGTH_M", 2.0)
+    monkeypatch.setattr(walk, "_apply_g", no_g)
+    monkeypatch.setattr(limits, "MAX_CURVE_LENGTH_M", 2.0)
     r = _post(client, "/api/generate", {"points": _line(32), "styles": ["Happy"]})  # 2.5 m
     assert r.status_code == 400, r.get_json()
-    assert re.search(r"3 m is longer than the limit of 2 m \(generate.MAX_CURVE_LENGTH_M\)", r.get_json()["error"])
+    assert re.search(r"3 m is longer than the limit of 2 m \(generate.limits.MAX_CURVE_LENGTH_M\)", r.get_json()["error"])
 
 
 def test_style_check_and_shapes(client, engine):
@@ -235,7 +237,7 @@ def test_exports_are_written_by_generate_py_writers(client, engine, tmp_path, mo
     motion = bvh.read_bvh(tmp_path / "a.bvh")
     assert motion.num_frames == 32 and motion.frame_time == pytest.approx(1 / RATE)
     res = engine.run(E.parse_request(body))
-    gen.save_bvh(tmp_path / "b.bvh", res.generated.positions[1], engine.layout, RATE)
+    writers.save_bvh(tmp_path / "b.bvh", res.generated.positions[1], engine.layout, RATE)
     assert (tmp_path / "b.bvh").read_bytes() == r.data
 
     r = _post(client, "/api/export", {**body, "format": "npz", "index": 0})

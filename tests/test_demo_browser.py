@@ -18,8 +18,9 @@ import time
 import numpy as np
 import pytest
 
-from motiongan_jax import bvh, pretrained
-from motiongan_jax import generate as gen
+from motiongan_jax.motion import bvh
+from motiongan_jax.train import pretrained
+from motiongan_jax.generate import styles
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
@@ -162,8 +163,8 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
             page.locator(".tab[data-mode=expr]").click()
             page.locator("#expr").fill("OldMan - Normal + Marchng")
             try:
-                gen.parse_style("OldMan - Normal + Marchng", names)
-            except gen.StyleError as e:
+                styles.parse_style("OldMan - Normal + Marchng", names)
+            except styles.StyleError as e:
                 want = str(e)
             page.wait_for_function("document.querySelector('#expr-check').classList.contains('bad')")
             assert page.locator("#expr-check").inner_text() == want

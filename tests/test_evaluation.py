@@ -16,7 +16,11 @@ import numpy as np
 import pytest
 
 from conftest import load_cli
-from motiongan_jax import checkpoint, curves, evaluation, evaluator, representation, synthetic
+from motiongan_jax.train import checkpoint
+from motiongan_jax.data import curves, synthetic
+from motiongan_jax.evaluation import evaluator
+from motiongan_jax.motion import representation
+from motiongan_jax.evaluation import clip_metrics, eval_curves
 
 # ---------------------------------------------------------------------------------------------
 # canonicalisation
@@ -126,11 +130,11 @@ def test_foot_joints_by_name_and_by_height():
 
 def test_heading_change_and_shape_curves():
     line = np.stack([np.zeros(50), np.zeros(50), np.linspace(0, 5, 50)], -1)
-    assert evaluation._heading_change_deg(line) == pytest.approx(0.0, abs=1e-9)
+    assert eval_curves._heading_change_deg(line) == pytest.approx(0.0, abs=1e-9)
     t = np.linspace(0, np.pi / 2, 50)  # a quarter circle
     arc = np.stack([1 - np.cos(t), np.zeros(50), np.sin(t)], -1)
-    assert evaluation._heading_change_deg(arc) == pytest.approx(90.0, abs=3.0)
-    shapes = evaluation.shape_curves(15.0, 1.2, L=64, T=16)
+    assert eval_curves._heading_change_deg(arc) == pytest.approx(90.0, abs=3.0)
+    shapes = eval_curves.shape_curves(15.0, 1.2, L=64, T=16)
     assert [c.name for c in shapes] == list(curves.SHAPES)
     for c in shapes:
         assert len(c.curve_Lx3) % 16 == 0 and len(c.curve_Lx3) <= 64
@@ -225,14 +229,16 @@ def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
 def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
     """plot_gait: per style, the toe heights of a held-out clip (as measured directly) beside G's on
     its path; the CLI writes the figure and refuses bad input with exit 2."""
-    from motiongan_jax import data, generate, metrics
-    from motiongan_jax.representation import from_rows
+    from motiongan_jax.data import dataset as data
+    from motiongan_jax.evaluation import metrics
+    from motiongan_jax.generate import walk
+    from motiongan_jax.motion.representation import from_rows
 
     state, meta, cfg, layout = checkpoint.load_run(tiny_run)
     ds = data.load_dataset(cfg.data)
     feet = representation.foot_joints(layout)
-    rate = generate.sample_rate(meta, cfg)
-    traces = evaluation.gait_traces(state, cfg, layout, ds.val, tuple(meta["style_names"]), feet, rate, seconds=2.0)
+    rate = walk.sample_rate(meta, cfg)
+    traces = clip_metrics.gait_traces(state, cfg, layout, ds.val, tuple(meta["style_names"]), feet, rate, seconds=2.0)
     assert [t.style for t in traces] == sorted({c.label.style for c in ds.val})
     n = int(2.0 * rate) // 8 * 8
     for t in traces:

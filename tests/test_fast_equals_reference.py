@@ -28,7 +28,7 @@ import pytest
 from flax import nnx
 
 from conftest import FAST, compiled_call
-from motiongan_jax import step as step_lib
+from motiongan_jax.train import state as train_state, step as step_lib_lib
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 from motiongan_jax.nn import Discriminator, Generator, conv, layers
 
@@ -274,8 +274,8 @@ def _one_step(impl: str, dtype: str):
     from test_step import LAYOUT, C  # the step tests' skeleton stand-in (27 joints)
 
     batch, key = _curvy_batch(2, STEP_T, LAYOUT.num_rows, jax.random.key(42)), jax.random.key(7)
-    state = step_lib.init_state(STEP_CFG, LAYOUT, C, jax.random.key(0), impl=impl, dtype=dtype)
-    step = jax.jit(step_lib.make_train_step(STEP_CFG, LAYOUT, C)).lower(state, batch, key).compile(
+    state = train_state.init_state(STEP_CFG, LAYOUT, C, jax.random.key(0), impl=impl, dtype=dtype)
+    step = jax.jit(step_lib_lib.make_train_step(STEP_CFG, LAYOUT, C)).lower(state, batch, key).compile(
         compiler_options=FAST)
     return step(state, batch, key)
 
@@ -349,6 +349,6 @@ def test_step_runs_g_once_and_d_three_times(monkeypatch):
 
     monkeypatch.setattr(Generator, "__call__", counting_g)
     monkeypatch.setattr(Discriminator, "__call__", counting_d)
-    state = jax.eval_shape(lambda: step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0)))
-    jax.eval_shape(step_lib.make_train_step(CFG, LAYOUT, C), state, _batch(), jax.random.key(1))
+    state = jax.eval_shape(lambda: train_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
+    jax.eval_shape(step_lib_lib.make_train_step(CFG, LAYOUT, C), state, _batch(), jax.random.key(1))
     assert calls == {"G": 1, "D": 3}

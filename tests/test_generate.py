@@ -19,8 +19,11 @@ import pytest
 
 from conftest import FAST, load_cli
 from conftest import random_run as _random_run
-from motiongan_jax import bvh, checkpoint, curves, generate as gen, ik, kinematics, representation, synthetic
-from motiongan_jax import step as step_lib
+from motiongan_jax.motion import bvh, ik, kinematics, representation
+from motiongan_jax.train import checkpoint
+from motiongan_jax.data import curves, synthetic
+from motiongan_jax.generate import limits, styles, user_curves, walk, writers
+from motiongan_jax.train import inference, state as train_state
 from motiongan_jax.config import load_config, override, to_dict
 
 T_LONG = 96
@@ -47,7 +50,7 @@ NAMES = ("Childish", "Drunk", "Happy", "Marching", "Normal", "OldMan", "Sad", "S
 
 def _line(T=T_LONG):
     """A straight curve that resamples to exactly T samples at SPEED and 15 Hz."""
-    return gen.Curve(curves.shape_curve("line", scale=(T - 1) * SPEED / 15 + 1e-6), "line")
+    return user_curves.Curve(curves.shape_curve("line", scale=(T - 1) * SPEED / 15 + 1e-6), "line")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -55,22 +58,22 @@ def _line(T=T_LONG):
 
 
 def test_parse_style_names_mixes_expressions_and_random():
-    assert gen.parse_style("Happy", NAMES) == gen.StyleSpec("label", (("Happy", 1.0),), text="Happy")
-    assert gen.parse_style(" happy ", NAMES).terms == (("Happy", 1.0),)
-    mix = gen.parse_style("Sad:0.3, Happy:0.7", NAMES)
+    assert styles.parse_style("Happy", NAMES) == styles.StyleSpec("label", (("Happy", 1.0),), text="Happy")
+    assert styles.parse_style(" happy ", NAMES).terms == (("Happy", 1.0),)
+    mix = styles.parse_style("Sad:0.3, Happy:0.7", NAMES)
     assert mix.kind == "mix" and mix.terms == (("Sad", 0.3), ("Happy", 0.7))
-    assert gen.parse_style("Sad:1,Happy:1", NAMES).terms == (("Sad", 0.5), ("Happy", 0.5))  # normalised
-    expr = gen.parse_style("OldMan - Normal + Marching", NAMES)
+    assert styles.parse_style("Sad:1,Happy:1", NAMES).terms == (("Sad", 0.5), ("Happy", 0.5))  # normalised
+    expr = styles.parse_style("OldMan - Normal + Marching", NAMES)
     assert expr.kind == "expr" and expr.terms == (("OldMan", 1.0), ("Normal", -1.0), ("Marching", 1.0))
     assert expr.text == "OldMan - Normal + Marching"
-    assert gen.parse_style("-Sad+0.5*Happy", NAMES).terms == (("Sad", -1.0), ("Happy", 0.5))
+    assert styles.parse_style("-Sad+0.5*Happy", NAMES).terms == (("Sad", -1.0), ("Happy", 0.5))
     # a style name containing '-' (Bandai's not-confident) is one operand
     bandai = ("normal", "not-confident", "proud")
-    assert gen.parse_style("not-confident", bandai).terms == (("not-confident", 1.0),)
-    assert gen.parse_style("proud - not-confident", bandai).terms == (("proud", 1.0), ("not-confident", -1.0))
-    r0, r1 = (gen.parse_style("random", NAMES, seed=s) for s in (0, 0))
+    assert styles.parse_style("not-confident", bandai).terms == (("not-confident", 1.0),)
+    assert styles.parse_style("proud - not-confident", bandai).terms == (("proud", 1.0), ("not-confident", -1.0))
+    r0, r1 = (styles.parse_style("random", NAMES, seed=s) for s in (0, 0))
     assert r0 == r1 and r0.kind == "label" and r0.terms[0][0] in NAMES
-    assert len({gen.parse_style("random", NAMES, seed=s).terms[0][0] for s in range(12)}) > 1
+    assert len({styles.parse_style("random", NAMES, seed=s).terms[0][0] for s in range(12)}) > 1
 
 
 @pytest.mark.parametrize("text, match", [
@@ -90,40 +93,40 @@ def test_parse_style_names_mixes_expressions_and_random():
     ("missing.npy", "style file 'missing.npy' not found"),
 ])
 def test_parse_style_errors_name_the_problem(text, match):
-    with pytest.raises(gen.StyleError, match=match):
-        gen.parse_style(text, NAMES)
+    with pytest.raises(styles.StyleError, match=match):
+        styles.parse_style(text, NAMES)
 
 
 def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_path):
     state, meta, _, _ = run
     names = meta["style_names"]
-    specs = [gen.parse_style(s, names) for s in
+    specs = [styles.parse_style(s, names) for s in
              ("Sad", "Happy", "Sad:1,Happy:0", "Sad:0,Happy:1", "Sad:0.5,Happy:0.5",
               "OldMan - Normal + Marching", "OldMan", "Normal", "Marching")]
-    w = gen.spec_codes(state, specs, names)
-    chex.assert_shape(w, (len(specs), gen.w_dim(state)))
+    w = styles.spec_codes(state, specs, names)
+    chex.assert_shape(w, (len(specs), styles.w_dim(state)))
     np.testing.assert_array_equal(w[2], w[0])  # α = 0: style A's w exactly
     np.testing.assert_array_equal(w[3], w[1])
     np.testing.assert_allclose(w[4], (w[0].astype(float) + w[1]) / 2, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(w[5], w[6].astype(float) - w[7] + w[8], rtol=1e-6, atol=1e-12)
     # the same as the Latent Transform with z = 0
-    direct = np.asarray(step_lib.latent_w(state, np.array([names.index("Sad")])))[0]
+    direct = np.asarray(inference.latent_w(state, np.array([names.index("Sad")])))[0]
     np.testing.assert_allclose(w[0], direct, rtol=1e-6, atol=1e-12)
     # a raw w file, and one of the wrong size (incompatible with this checkpoint)
     np.save(tmp_path / "w.npy", w[1])
-    np.testing.assert_array_equal(gen.spec_codes(state, [gen.parse_style(str(tmp_path / "w.npy"), names)], names)[0], w[1])
-    np.savetxt(tmp_path / "bad.txt", np.zeros(gen.w_dim(state) + 3))
-    with pytest.raises(gen.StyleError, match=f"has {gen.w_dim(state) + 3} values.*w has {gen.w_dim(state)}"):
-        gen.spec_codes(state, [gen.parse_style(str(tmp_path / "bad.txt"), names)], names)
+    np.testing.assert_array_equal(styles.spec_codes(state, [styles.parse_style(str(tmp_path / "w.npy"), names)], names)[0], w[1])
+    np.savetxt(tmp_path / "bad.txt", np.zeros(styles.w_dim(state) + 3))
+    with pytest.raises(styles.StyleError, match=f"has {styles.w_dim(state) + 3} values.*w has {styles.w_dim(state)}"):
+        styles.spec_codes(state, [styles.parse_style(str(tmp_path / "bad.txt"), names)], names)
     # z modes
-    z_dim = step_lib.generator_z_dim(state)
-    chex.assert_shape(gen.z_codes(state, "zero"), (1, z_dim))
-    assert not np.any(gen.z_codes(state, "zero"))
-    np.testing.assert_array_equal(gen.z_codes(state, "seed", 3), gen.z_codes(state, "seed", 3))
-    chex.assert_shape(gen.z_codes(state, "3", 0), (3, z_dim))
-    chex.assert_shape(gen.spec_codes(state, specs[:2], names, gen.z_codes(state, 3)), (6, gen.w_dim(state)))
-    with pytest.raises(gen.GenerateError, match="--z must be"):
-        gen.z_codes(state, "lots")
+    z_dim = inference.generator_z_dim(state)
+    chex.assert_shape(styles.z_codes(state, "zero"), (1, z_dim))
+    assert not np.any(styles.z_codes(state, "zero"))
+    np.testing.assert_array_equal(styles.z_codes(state, "seed", 3), styles.z_codes(state, "seed", 3))
+    chex.assert_shape(styles.z_codes(state, "3", 0), (3, z_dim))
+    chex.assert_shape(styles.spec_codes(state, specs[:2], names, styles.z_codes(state, 3)), (6, styles.w_dim(state)))
+    with pytest.raises(limits.GenerateError, match="--z must be"):
+        styles.z_codes(state, "lots")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -132,52 +135,52 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
 
 def test_prepare_curve_spacing_keeps_every_sample():
     notes = []
-    c = gen.prepare_curve(_line(), 15.0, SPEED, log=notes.append)
+    c = user_curves.prepare_curve(_line(), 15.0, SPEED, log=notes.append)
     chex.assert_shape(c, (T_LONG, 3))
     assert c.dtype == np.float32 and not np.any(c[:, 1])
     np.testing.assert_allclose(np.linalg.norm(np.diff(c, axis=0), axis=1), SPEED / 15, rtol=1e-5)
     assert "96 samples" in notes[0] and "walked in full" not in notes[0]
     # 101 samples: all kept (the whole curve is walked); G will run on 104
-    c = gen.prepare_curve(_line(T_LONG + 5), 15.0, SPEED, log=notes.append)
+    c = user_curves.prepare_curve(_line(T_LONG + 5), 15.0, SPEED, log=notes.append)
     assert len(c) == T_LONG + 5 and "101 samples" in notes[-1] and "cropped back to its 101 samples" in notes[-1]
-    assert gen.padded_length(101) == 104 and gen.padded_length(96) == 96 and gen.padded_length(3) == gen.MIN_T
-    c = gen.prepare_curve(gen.Curve(np.array([[0.0, 0.0], [0.5, 0.0]]), "short"), 15.0, SPEED, log=notes.append)
-    assert len(c) == 7 and f"at least {gen.MIN_T}" in notes[-1]  # 0.5 m at 8 cm: 0, 0.08, ..., 0.48
+    assert walk.padded_length(101) == 104 and walk.padded_length(96) == 96 and walk.padded_length(3) == walk.MIN_T
+    c = user_curves.prepare_curve(user_curves.Curve(np.array([[0.0, 0.0], [0.5, 0.0]]), "short"), 15.0, SPEED, log=notes.append)
+    assert len(c) == 7 and f"at least {walk.MIN_T}" in notes[-1]  # 0.5 m at 8 cm: 0, 0.08, ..., 0.48
     np.testing.assert_allclose(np.diff(c[:, 0]), SPEED / 15, rtol=1e-5)
-    c = gen.prepare_curve(gen.load_curve("circle", scale=1.0), 15.0, 0.6)  # speed sets the spacing
+    c = user_curves.prepare_curve(user_curves.load_curve("circle", scale=1.0), 15.0, 0.6)  # speed sets the spacing
     np.testing.assert_allclose(np.linalg.norm(np.diff(c, axis=0), axis=1), 0.04, rtol=1e-3)
-    with pytest.raises(gen.GenerateError, match="speed must be"):
-        gen.prepare_curve(_line(), 15.0, -1.0)
+    with pytest.raises(limits.GenerateError, match="speed must be"):
+        user_curves.prepare_curve(_line(), 15.0, -1.0)
 
 
 def test_curve_limits_refuse_before_allocating(tmp_path, monkeypatch):
     import time
 
     t0 = time.perf_counter()
-    with pytest.raises(gen.GenerateError, match=r"10,000,000 m is longer than the limit of 10,000 m"):
-        gen.load_curve("line", length=1e7)
-    with pytest.raises(gen.GenerateError, match="longer than the limit"):
-        gen.load_curve("circle", scale=1e9)
+    with pytest.raises(limits.GenerateError, match=r"10,000,000 m is longer than the limit of 10,000 m"):
+        user_curves.load_curve("line", length=1e7)
+    with pytest.raises(limits.GenerateError, match="longer than the limit"):
+        user_curves.load_curve("circle", scale=1e9)
     (tmp_path / "far.csv").write_text("0,0\n1e9,0\n")  # 93 GiB of samples, once
-    with pytest.raises(gen.GenerateError, match=r"far.csv: 1,000,000,000 m is longer than the limit"):
-        gen.load_curve(str(tmp_path / "far.csv"))
+    with pytest.raises(limits.GenerateError, match=r"far.csv: 1,000,000,000 m is longer than the limit"):
+        user_curves.load_curve(str(tmp_path / "far.csv"))
     calls = []
     monkeypatch.setattr(curves, "resample_polyline", lambda *a, **k: calls.append(a))
     # 5 km is allowed, but at 8 cm per sample it is 62,501 samples, more than G may walk
-    with pytest.raises(gen.GenerateError, match=r"62,501 samples at 0.08 m .* limit of 36,000 \(40 minutes"):
-        gen.prepare_curve(np.array([[0.0, 0.0], [5000.0, 0.0]]), 15.0, SPEED)
-    with pytest.raises(gen.GenerateError, match="longer than the limit"):  # an array, the demo's way in
-        gen.prepare_curve(np.array([[0.0, 0.0], [0.0, 2e4]]), 15.0, SPEED)
-    with pytest.raises(gen.GenerateError, match=r"250,001 points are more than the limit of 250,000"):
-        gen.prepare_curve(np.stack([np.arange(250_001) * 1e-3, np.zeros(250_001)], -1), 15.0, SPEED)
+    with pytest.raises(limits.GenerateError, match=r"62,501 samples at 0.08 m .* limit of 36,000 \(40 minutes"):
+        user_curves.prepare_curve(np.array([[0.0, 0.0], [5000.0, 0.0]]), 15.0, SPEED)
+    with pytest.raises(limits.GenerateError, match="longer than the limit"):  # an array, the demo's way in
+        user_curves.prepare_curve(np.array([[0.0, 0.0], [0.0, 2e4]]), 15.0, SPEED)
+    with pytest.raises(limits.GenerateError, match=r"250,001 points are more than the limit of 250,000"):
+        user_curves.prepare_curve(np.stack([np.arange(250_001) * 1e-3, np.zeros(250_001)], -1), 15.0, SPEED)
     assert not calls  # refused before resampling
-    monkeypatch.setattr(gen, "MAX_CURVE_FILE_BYTES", 100)
+    monkeypatch.setattr(limits, "MAX_CURVE_FILE_BYTES", 100)
     (tmp_path / "big.csv").write_text("".join(f"{i},0\n" for i in range(50)))
-    with pytest.raises(gen.GenerateError, match=r"big.csv: .* larger than the limit"):
-        gen.load_curve(str(tmp_path / "big.csv"))
+    with pytest.raises(limits.GenerateError, match=r"big.csv: .* larger than the limit"):
+        user_curves.load_curve(str(tmp_path / "big.csv"))
     assert time.perf_counter() - t0 < 5.0
     # the bounds themselves: a 10-minute walk fits, at the default speed and the shipped 15 Hz
-    assert 10 * 60 * 15 < gen.MAX_CURVE_SAMPLES and 10 * 60 * gen.DEFAULT_SPEED_M_PER_S < gen.MAX_CURVE_LENGTH_M
+    assert 10 * 60 * 15 < limits.MAX_CURVE_SAMPLES and 10 * 60 * user_curves.DEFAULT_SPEED_M_PER_S < limits.MAX_CURVE_LENGTH_M
 
 
 def test_bad_curves_are_clear_errors(tmp_path):
@@ -185,21 +188,21 @@ def test_bad_curves_are_clear_errors(tmp_path):
     (tmp_path / "same.csv").write_text("1,1\n1,1\n1,1\n")
     (tmp_path / "tiny.json").write_text("[[0, 0], [0.01, 0]]")
     with pytest.raises(curves.CurveFileError, match="empty.csv: no x,z rows"):
-        gen.load_curve(str(tmp_path / "empty.csv"))
+        user_curves.load_curve(str(tmp_path / "empty.csv"))
     with pytest.raises(curves.DegenerateCurveError, match="zero length"):
-        gen.load_curve(str(tmp_path / "same.csv"))
+        user_curves.load_curve(str(tmp_path / "same.csv"))
     with pytest.raises(curves.DegenerateCurveError, match="shorter than one spacing"):
-        gen.prepare_curve(gen.load_curve(str(tmp_path / "tiny.json")), 15.0, SPEED)
-    with pytest.raises(gen.GenerateError, match="not a shape name .*no such file"):
-        gen.load_curve("squiggle")
-    with pytest.raises(gen.GenerateError, match="scale must be"):
-        gen.load_curve("circle", scale=0)
+        user_curves.prepare_curve(user_curves.load_curve(str(tmp_path / "tiny.json")), 15.0, SPEED)
+    with pytest.raises(limits.GenerateError, match="not a shape name .*no such file"):
+        user_curves.load_curve("squiggle")
+    with pytest.raises(limits.GenerateError, match="scale must be"):
+        user_curves.load_curve("circle", scale=0)
 
 
 def test_bvh_curve_uses_the_pelvis_path_at_its_own_speed(tmp_path):
     motion = synthetic.generate_clip(synthetic.STYLES["Normal"], key_or_seed=0, num_frames=240)
     bvh.write_bvh(tmp_path / "walk.bvh", motion)
-    c = gen.load_curve(str(tmp_path / "walk.bvh"), control_seconds=2.0)
+    c = user_curves.load_curve(str(tmp_path / "walk.bvh"), control_seconds=2.0)
     assert c.smooth_interval == 120 and len(c.points) == 240
     assert c.speed_m_per_s == pytest.approx(synthetic.STYLES["Normal"].speed, rel=0.1)
 
@@ -210,17 +213,17 @@ def test_bvh_curve_uses_the_pelvis_path_at_its_own_speed(tmp_path):
 
 def test_a_curve_six_windows_long_walks_on_the_floor(run):
     state, meta, cfg, layout = run
-    assert cfg.data.window_T == 16 and gen.sample_rate(meta, cfg) == 15.0
-    curve = gen.prepare_curve(_line(), gen.sample_rate(meta, cfg), SPEED)
-    w = gen.spec_codes(state, [gen.parse_style("Happy", meta["style_names"])], meta["style_names"])
-    out = gen.generate_motion(state, layout, curve, w)
+    assert cfg.data.window_T == 16 and walk.sample_rate(meta, cfg) == 15.0
+    curve = user_curves.prepare_curve(_line(), walk.sample_rate(meta, cfg), SPEED)
+    w = styles.spec_codes(state, [styles.parse_style("Happy", meta["style_names"])], meta["style_names"])
+    out = walk.generate_motion(state, layout, curve, w)
     J = layout.num_joints
     chex.assert_shape(out.positions, (1, T_LONG, J, 3))
     chex.assert_shape(out.root_velocity, (1, T_LONG, 3))
     chex.assert_shape(out.pose, (1, T_LONG, 3 * (J - 1)))
     chex.assert_tree_all_finite((out.positions, out.floor_shift_m))
     lowest = out.positions[0, :, :, 1].min(axis=-1)
-    assert np.percentile(lowest, gen.FLOOR_PERCENTILE) == pytest.approx(0.0, abs=1e-9)
+    assert np.percentile(lowest, walk.FLOOR_PERCENTILE) == pytest.approx(0.0, abs=1e-9)
     # the root starts at the curve's start on the floor plan and follows G's velocity after it
     np.testing.assert_allclose(out.positions[0, 0, 0, [0, 2]], curve[0, [0, 2]], atol=1e-6)
     np.testing.assert_allclose(np.diff(out.positions[0, :, 0], axis=0), out.root_velocity[0, 1:], atol=1e-9)
@@ -228,10 +231,10 @@ def test_a_curve_six_windows_long_walks_on_the_floor(run):
     root = np.asarray(curves.integrate(curve[:1] * [1, 0, 1], out.root_velocity.astype(np.float32)))[0]
     np.testing.assert_allclose(out.positions[0, :, 0] - [0, out.floor_shift_m[0], 0], root, rtol=1e-5, atol=1e-4)
     # more motions x samples than one call may hold: refused before G runs
-    with pytest.raises(gen.GenerateError, match=r"9 motions x 36,000 samples = 324,000 are more than the limit"):
-        gen.generate_motion(state, layout, np.zeros((36_000, 3)), np.repeat(w, 9, 0))
-    with pytest.raises(gen.GenerateError, match=r"36,001 samples are more than the limit of 36,000"):
-        gen.generate_motion(state, layout, np.zeros((36_001, 3)), w)
+    with pytest.raises(limits.GenerateError, match=r"9 motions x 36,000 samples = 324,000 are more than the limit"):
+        walk.generate_motion(state, layout, np.zeros((36_000, 3)), np.repeat(w, 9, 0))
+    with pytest.raises(limits.GenerateError, match=r"36,001 samples are more than the limit of 36,000"):
+        walk.generate_motion(state, layout, np.zeros((36_001, 3)), w)
 
 
 def _arc_then_straight(M, turn_samples, spacing=SPEED / 15, rate=0.03):
@@ -251,9 +254,9 @@ def test_the_whole_curve_is_walked_and_the_motion_cropped_to_it(run):
     would normalise rounding noise)."""
     state, meta, cfg, layout = run
     full = _arc_then_straight(T_LONG, 80)
-    w = gen.spec_codes(state, [gen.parse_style("Sad", meta["style_names"])], meta["style_names"])
-    ref = gen.generate_motion(state, layout, full, w)
-    out = gen.generate_motion(state, layout, full[:90], w)
+    w = styles.spec_codes(state, [styles.parse_style("Sad", meta["style_names"])], meta["style_names"])
+    ref = walk.generate_motion(state, layout, full, w)
+    out = walk.generate_motion(state, layout, full[:90], w)
     chex.assert_shape(out.positions, (1, 90, layout.num_joints, 3))
     chex.assert_shape([out.root_velocity, out.curve], [(1, 90, 3), (90, 3)])
     # measured 1.5e-4 of the largest value; padding by standing still instead differs by 1.7
@@ -262,22 +265,22 @@ def test_the_whole_curve_is_walked_and_the_motion_cropped_to_it(run):
     np.testing.assert_allclose(out.root_velocity, ref.root_velocity[:, :90], atol=2e-3 * scale)
     # the feet go on the floor over the clip's own frames
     lowest = out.positions[0, :, :, 1].min(axis=-1)
-    assert np.percentile(lowest, gen.FLOOR_PERCENTILE) == pytest.approx(0.0, abs=1e-9)
+    assert np.percentile(lowest, walk.FLOOR_PERCENTILE) == pytest.approx(0.0, abs=1e-9)
     np.testing.assert_allclose(out.positions[0, 0, 0, [0, 2]], full[0, [0, 2]], atol=1e-6)
     # a very short curve: 5 samples, G on MIN_T, 5 frames back
-    assert gen.generate_motion(state, layout, full[:5], w).positions.shape[1] == 5
-    with pytest.raises(gen.GenerateError, match=r"M >= 2"):
-        gen.generate_motion(state, layout, full[:1], w)
+    assert walk.generate_motion(state, layout, full[:5], w).positions.shape[1] == 5
+    with pytest.raises(limits.GenerateError, match=r"M >= 2"):
+        walk.generate_motion(state, layout, full[:1], w)
 
 
 def test_chunk_starts_and_weights():
-    assert gen.chunk_starts(2048, 4096) == [0]
-    assert gen.chunk_starts(2048, 1024) == [0, 512, 1024]  # (2048 - 1024) / (1024 - 512) + 1 chunks
+    assert walk.chunk_starts(2048, 4096) == [0]
+    assert walk.chunk_starts(2048, 1024) == [0, 512, 1024]  # (2048 - 1024) / (1024 - 512) + 1 chunks
     for T in (1032, 1536, 2056, 5000 // 8 * 8, 9000, 36_000):
-        starts = gen.chunk_starts(T, 1024)
+        starts = walk.chunk_starts(T, 1024)
         assert starts[0] == 0 and starts[-1] == T - 1024 and all(s % 8 == 0 for s in starts)
-        assert all(b - a <= 1024 - gen.CHUNK_OVERLAP for a, b in zip(starts, starts[1:])), T
-        weights = gen.chunk_weights(starts, 1024)
+        assert all(b - a <= 1024 - walk.CHUNK_OVERLAP for a, b in zip(starts, starts[1:])), T
+        weights = walk.chunk_weights(starts, 1024)
         total = np.zeros(T)
         for s, w in zip(starts, weights):
             total[s:s + 1024] += w
@@ -285,15 +288,15 @@ def test_chunk_starts_and_weights():
         # no sample within CHUNK_MARGIN of a chunk end that meets another chunk is used
         for i, w in enumerate(weights):
             if i > 0:
-                assert not w[:gen.CHUNK_MARGIN].any()
-                assert w[gen.CHUNK_MARGIN + gen.CHUNK_FADE:-gen.CHUNK_OVERLAP].min() == 1
+                assert not w[:walk.CHUNK_MARGIN].any()
+                assert w[walk.CHUNK_MARGIN + walk.CHUNK_FADE:-walk.CHUNK_OVERLAP].min() == 1
             if i < len(weights) - 1:
-                assert not w[-gen.CHUNK_MARGIN:].any()
+                assert not w[-walk.CHUNK_MARGIN:].any()
     # where exactly two chunks overlap by CHUNK_OVERLAP the weights sum to 1 before normalising
-    w0, w1 = gen.chunk_weights([0, 512], 1024)
+    w0, w1 = walk.chunk_weights([0, 512], 1024)
     np.testing.assert_allclose(w0[512:] + w1[:512], 1.0, atol=1e-12)
-    with pytest.raises(gen.GenerateError, match="chunk_T must be"):
-        gen.chunk_starts(4096, 1000)
+    with pytest.raises(limits.GenerateError, match="chunk_T must be"):
+        walk.chunk_starts(4096, 1000)
 
 
 @pytest.fixture(scope="module")
@@ -309,11 +312,11 @@ def gait_model(repo):
                    ["model.output_prior=true", "model.g_frame=curve", "model.gait_phase=true",
                     "model.root_height=true"])
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    state = step_lib.init_state(cfg, layout, len(NAMES), jax.random.key(0))
+    state = train_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
     from motiongan_jax.nn.generator import STRIDE_GAIN
 
-    g = step_lib.generator(state)
-    w = gen.spec_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
+    g = inference.generator(state)
+    w = styles.spec_codes(state, [styles.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     g.stride_head.kernel[...] = (np.linalg.pinv(w) @ (np.log([0.8, 1.4]) / STRIDE_GAIN))[:, None]
     return state.replace(g_params=nnx.state(g, nnx.Param)), layout
 
@@ -369,18 +372,18 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     restarted clock: the phase, not the statistics, is what a restart would break."""
     state, layout = gait_model
     M, L = 1530, 1024
-    monkeypatch.setattr(gen, "_apply_g", _compiled_fast(gen._apply_g))
-    real = gen._apply_g
+    monkeypatch.setattr(walk, "_apply_g", _compiled_fast(walk._apply_g))
+    real = walk._apply_g
     full = _wandering(1536, straight_from=1500)
-    w = gen.spec_codes(state, [gen.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
+    w = styles.spec_codes(state, [styles.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     phi0 = np.array([0.5, 4.0])
-    ref = gen.generate_motion(state, layout, full, w, phi0)
+    ref = walk.generate_motion(state, layout, full, w, phi0)
     calls, progress = [], []
-    monkeypatch.setattr(gen, "_apply_g", lambda st, v, ww, ph: (calls.append((v, ww, ph)), real(st, v, ww, ph))[1])
-    one = gen.generate_motion(state, layout, full[:M], w, phi0)
+    monkeypatch.setattr(walk, "_apply_g", lambda st, v, ww, ph: (calls.append((v, ww, ph)), real(st, v, ww, ph))[1])
+    one = walk.generate_motion(state, layout, full[:M], w, phi0)
     assert [c[0].shape for c in calls] == [(2, 1536, 3)]
     calls.clear()
-    ch = gen.generate_motion(state, layout, full[:M], w, phi0, chunk_T=L, progress=lambda d, n: progress.append((d, n)))
+    ch = walk.generate_motion(state, layout, full[:M], w, phi0, chunk_T=L, progress=lambda d, n: progress.append((d, n)))
     assert [c[0].shape for c in calls] == [(2, L, 3)] * 2 and progress == [(1, 2), (2, 2)]
     chex.assert_shape([one.positions, ch.positions], (2, M, layout.num_joints, 3))
     # the whole curve is walked: padded and cropped = the longer curve's first M frames
@@ -388,7 +391,7 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     np.testing.assert_allclose(one.pose, ref.pose[:, :M], atol=1e-5 * scale)
     np.testing.assert_allclose(one.root_velocity, ref.root_velocity[:, :M], atol=1e-5 * scale)
     # one clock: the phase G walks in each chunk is one pass's
-    g = step_lib.generator(state)
+    g = inference.generator(state)
     np.testing.assert_allclose(np.exp(np.asarray(g.log_stride(jax.numpy.asarray(w)))), [0.8, 1.4], rtol=1e-4)
     clock = np.asarray(g.walked_phase(curves.velocity(jax.numpy.asarray(np.stack([full] * 2))), jax.numpy.asarray(w),
                                       jax.numpy.asarray(phi0, jax.numpy.float32)))
@@ -407,16 +410,16 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     assert np.linalg.norm(ch.positions[:, :, 0, [0, 2]] - one.positions[:, :, 0, [0, 2]], axis=-1).mean() < 0.3
     assert np.abs(height(ch) - height(one)).max() < 0.04
     # where the second chunk alone is used, a restarted clock is far further off than the statistics
-    tail = slice(512 + gen.CHUNK_MARGIN + gen.CHUNK_FADE, M)
-    restarted = np.asarray(real(step_lib.generator_state(state), v1, w1, restart)[1])[:, tail.start - 512:M - 512]
+    tail = slice(512 + walk.CHUNK_MARGIN + walk.CHUNK_FADE, M)
+    restarted = np.asarray(real(inference.generator_state(state), v1, w1, restart)[1])[:, tail.start - 512:M - 512]
     assert rel(restarted, one.pose[:, tail]) > 10 * rel(ch.pose[:, tail], one.pose[:, tail])
     # no seam: where the chunks blend, pose, root velocity and height change no faster than elsewhere
-    seam = slice(512 + gen.CHUNK_MARGIN, 1024 - gen.CHUNK_MARGIN)
+    seam = slice(512 + walk.CHUNK_MARGIN, 1024 - walk.CHUNK_MARGIN)
     for x in (ch.pose, ch.root_velocity, height(ch)[..., None]):
         jump = np.abs(np.diff(x, axis=1)).max(axis=(0, 2))
         assert jump[seam].max() < 1.5 * max(jump[:seam.start].max(), jump[seam.stop:].max())
-    with pytest.raises(gen.GenerateError, match="phase offsets must be 2 finite numbers"):
-        gen.generate_motion(state, layout, full[:M], w, np.zeros(3))
+    with pytest.raises(limits.GenerateError, match="phase offsets must be 2 finite numbers"):
+        walk.generate_motion(state, layout, full[:M], w, np.zeros(3))
 
 
 def test_motions_are_generated_in_groups_that_fit_batch_samples(run, monkeypatch):
@@ -433,30 +436,30 @@ def test_motions_are_generated_in_groups_that_fit_batch_samples(run, monkeypatch
                                       v.shape[:2] + (layout.num_rows,))
         return root, pose
 
-    monkeypatch.setattr(gen, "_apply_g", fake_g)
+    monkeypatch.setattr(walk, "_apply_g", fake_g)
     curve = _wandering(T_LONG)
     w = np.random.default_rng(1).normal(size=(5, 8)).astype(np.float32)
-    one = gen.generate_motion(state, layout, curve, w)
+    one = walk.generate_motion(state, layout, curve, w)
     assert calls == [(5, T_LONG, 3)]
     calls.clear()
-    monkeypatch.setattr(gen, "BATCH_SAMPLES", 200)
-    grouped = gen.generate_motion(state, layout, curve, w)
+    monkeypatch.setattr(walk, "BATCH_SAMPLES", 200)
+    grouped = walk.generate_motion(state, layout, curve, w)
     assert calls == [(2, T_LONG, 3)] * 3
     np.testing.assert_array_equal(grouped.pose, one.pose)
     np.testing.assert_array_equal(grouped.positions, one.positions)
 
 
 def test_figures_panels():
-    interp = gen.figure_specs("interp", "Sad, Happy", NAMES)
-    assert [s.terms for _, s in interp] == [(("Sad", 1 - a), ("Happy", a)) for a in gen.INTERP_ALPHAS]
-    arith = gen.figure_specs("arith", "OldMan - Normal + Marching", NAMES)
+    interp = styles.figure_specs("interp", "Sad, Happy", NAMES)
+    assert [s.terms for _, s in interp] == [(("Sad", 1 - a), ("Happy", a)) for a in styles.INTERP_ALPHAS]
+    arith = styles.figure_specs("arith", "OldMan - Normal + Marching", NAMES)
     assert [t for t, _ in arith] == ["OldMan", "Normal", "Marching", "OldMan - Normal + Marching"]
-    assert [t for t, _ in gen.figure_specs("styles", None, NAMES)] == list(NAMES)
-    assert [t for t, _ in gen.figure_specs("styles", "Sad,Happy", NAMES)] == ["Sad", "Happy"]
-    with pytest.raises(gen.StyleError, match="two styles"):
-        gen.figure_specs("interp", "Sad", NAMES)
-    with pytest.raises(gen.StyleError, match="expression"):
-        gen.figure_specs("arith", "Sad", NAMES)
+    assert [t for t, _ in styles.figure_specs("styles", None, NAMES)] == list(NAMES)
+    assert [t for t, _ in styles.figure_specs("styles", "Sad,Happy", NAMES)] == ["Sad", "Happy"]
+    with pytest.raises(styles.StyleError, match="two styles"):
+        styles.figure_specs("interp", "Sad", NAMES)
+    with pytest.raises(styles.StyleError, match="expression"):
+        styles.figure_specs("arith", "Sad", NAMES)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -676,21 +679,21 @@ def test_cli_mp4_failing_ffmpeg_is_a_clear_error(run_dir, cli, tmp_path, capsys,
 def test_unwritable_output_leaves_nothing(run, tmp_path):
     state, meta, cfg, layout = run
     (tmp_path / "file").write_text("")
-    with pytest.raises(gen.GenerateError, match="is not a directory"):
-        gen.check_output_path(tmp_path / "file" / "a.bvh")
+    with pytest.raises(limits.GenerateError, match="is not a directory"):
+        writers.check_output_path(tmp_path / "file" / "a.bvh")
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o500)
     try:
         if not os.access(ro, os.W_OK):  # (root may write anywhere)
-            with pytest.raises(gen.GenerateError, match="not writable"):
-                gen.check_output_path(ro / "a.bvh")
+            with pytest.raises(limits.GenerateError, match="not writable"):
+                writers.check_output_path(ro / "a.bvh")
     finally:
         ro.chmod(0o700)
     # a failure while writing (here: non-finite positions) leaves no file and no temp file
-    bad = gen.Generated(np.full((1, 16, layout.num_joints, 3), np.nan), None, None,
+    bad = walk.Generated(np.full((1, 16, layout.num_joints, 3), np.nan), None, None,
                         np.zeros((16, 3), np.float32), np.zeros((1, 8), np.float32), np.zeros(1))
     for name in ("a.bvh", "a.npz"):
         with pytest.raises(ik.IKError):
-            gen.write_outputs(tmp_path / name, bad, ["x"], layout, 15.0)
+            writers.write_outputs(tmp_path / name, bad, ["x"], layout, 15.0)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "ro"]

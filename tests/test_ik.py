@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from motiongan_jax import bvh, ik, kinematics, representation, synthetic
+from motiongan_jax.motion import bvh, ik, kinematics, representation
+from motiongan_jax.data import synthetic
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from motiongan_jax import bvh
-from motiongan_jax.kinematics import euler_to_matrix, fk, local_transforms, world_positions
+from motiongan_jax.motion import bvh
+from motiongan_jax.motion.kinematics import euler_to_matrix, fk, local_transforms, world_positions
 
 ORDERS = ["".join(p) for p in itertools.permutations("XYZ")]
 

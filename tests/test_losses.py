@@ -9,7 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from motiongan_jax import curves, losses, representation
+from motiongan_jax.data import curves
+from motiongan_jax.train import losses
+from motiongan_jax.motion import representation
 
 
 def test_bce_prob_hand():

@@ -1,4 +1,4 @@
-"""Evaluation metrics (motiongan_jax/metrics.py): hand-computed values, invariants, second methods."""
+"""Evaluation metrics (motiongan_jax/evaluation/metrics.py): hand-computed values, invariants, second methods."""
 
 import math
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from motiongan_jax import metrics as M
-from motiongan_jax.analysis import pca
+from motiongan_jax.evaluation import metrics as M
+from motiongan_jax.analysis.style_space import pca
 
 
 def _line(T, step_m, direction=(1.0, 0.0)):

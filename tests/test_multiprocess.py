@@ -16,7 +16,7 @@ import sys
 import time
 
 from conftest import assert_bit_identical
-from motiongan_jax import checkpoint
+from motiongan_jax.train import checkpoint
 
 # runs bin/train.py with an audit hook that records, on a descriptor opened before it, every
 # path under the workdir (outside checkpoints/) that the process opens for writing, creates,

@@ -1,4 +1,4 @@
-"""Inference exports (motiongan_jax/pretrained.py, bin/export_model.py) and the shipped model.
+"""Inference exports (motiongan_jax/train/pretrained.py, bin/export_model.py) and the shipped model.
 
 Exports are made from checkpoints of the tiny config with seeded random parameters (conftest's random_run),
 with a moving average unlike the trained parameters, so a test can tell which set was exported.
@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 from conftest import load_cli, random_run
-from motiongan_jax import bvh, checkpoint, curves, pretrained
-from motiongan_jax import generate as gen
+from motiongan_jax.motion import bvh
+from motiongan_jax.train import checkpoint, pretrained
+from motiongan_jax.data import curves
+from motiongan_jax.generate import styles, user_curves, walk
 from motiongan_jax.config import config_hash, from_dict, load_config, override
 
 SPEED = 1.2
@@ -57,11 +59,11 @@ def _sha256(arrays, names) -> str:
 
 def _walk(state, layout, meta, cfg, style="Happy", T=32):
     """G along a straight line of exactly T samples."""
-    rate, names = gen.sample_rate(meta, cfg), list(meta["style_names"])
+    rate, names = walk.sample_rate(meta, cfg), list(meta["style_names"])
     line = curves.shape_curve("line", scale=(T - 1) * SPEED / rate + 1e-6)
-    curve = gen.prepare_curve(gen.Curve(line, "line"), rate, SPEED)
-    w = gen.spec_codes(state, [gen.parse_style(style, names)], names)
-    return gen.generate_motion(state, layout, curve, w)
+    curve = user_curves.prepare_curve(user_curves.Curve(line, "line"), rate, SPEED)
+    w = styles.spec_codes(state, [styles.parse_style(style, names)], names)
+    return walk.generate_motion(state, layout, curve, w)
 
 
 def test_export_holds_the_moving_average_and_generates_what_the_checkpoint_does(exported):
@@ -213,7 +215,7 @@ def test_generate_cli_uses_the_shipped_model_without_a_workdir(repo, shipped, tm
     assert main(["--list-styles"]) == 0
     assert capsys.readouterr().out.split() == list(shipped.meta["style_names"])
     out = tmp_path / "walk.bvh"
-    rate = gen.sample_rate(shipped.meta, from_dict(shipped.meta["config"]))
+    rate = walk.sample_rate(shipped.meta, from_dict(shipped.meta["config"]))
     assert main(["--style", "Sad:0.3,Happy:0.7", "--curve", "line", "--length",
                  str(47 * SPEED / rate + 1e-6), "--out", str(out)]) == 0
     motion = bvh.read_bvh(out)

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from expected import PAPER_BONES, PAPER_JOINTS
-from motiongan_jax import bvh, kinematics
-from motiongan_jax.representation import (bone_lengths, from_rows, layout_from_skeleton,
+from motiongan_jax.motion import bvh, kinematics
+from motiongan_jax.motion.representation import (bone_lengths, from_rows, layout_from_skeleton,
                                           representation_root, to_rows)
 
 CMU_UNIT = 0.056444
@@ -71,8 +71,8 @@ def test_hand_built_skeleton():
 
 
 def test_units_are_guessed_from_the_leg(cmu, bandai):
-    from motiongan_jax import synthetic
-    from motiongan_jax.representation import guess_units_to_m
+    from motiongan_jax.data import synthetic
+    from motiongan_jax.motion.representation import guess_units_to_m
 
     assert guess_units_to_m(cmu.skeleton) == CMU_UNIT
     assert guess_units_to_m(synthetic.cmu_skeleton()) == CMU_UNIT
@@ -83,7 +83,7 @@ def test_units_are_guessed_from_the_leg(cmu, bandai):
 
 
 def test_curve_from_bvh_is_the_root_floor_path(shared_data):
-    from motiongan_jax import curves
+    from motiongan_jax.data import curves
 
     path = shared_data / "bandai" / "dataset-2" / "dataset-2_walk_normal_001.bvh"
     motion = bvh.read_bvh(path)

@@ -13,7 +13,7 @@ import pytest
 from flax import nnx
 
 from conftest import FAST
-from motiongan_jax import step as step_lib
+from motiongan_jax.train import inference, objectives, state as train_state, step as step_lib_lib
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 
@@ -52,10 +52,10 @@ def _leaves_equal(a, b) -> bool:
 
 @pytest.fixture(scope="module")
 def setup():
-    state0 = step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0))
+    state0 = train_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
     batch = _batch()
     key = jax.random.key(7)
-    step = jax.jit(step_lib.make_train_step(CFG, LAYOUT, C)).lower(state0, batch, key).compile(
+    step = jax.jit(step_lib_lib.make_train_step(CFG, LAYOUT, C)).lower(state0, batch, key).compile(
         compiler_options=FAST)
 
     def run(state, base_key, n=3):
@@ -114,18 +114,18 @@ def test_same_key_is_bit_identical_and_pure(setup):
 
 
 def test_init_is_reproducible(setup):
-    same = step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0))
+    same = train_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
     assert _leaves_equal(same, setup["state0"])
-    other = step_lib.init_state(CFG, LAYOUT, C, jax.random.key(1))
+    other = train_state.init_state(CFG, LAYOUT, C, jax.random.key(1))
     assert not _leaves_equal(other.g_params, setup["state0"].g_params)
     assert not _leaves_equal(other.d_sn_state, setup["state0"].d_sn_state)
 
 
 def test_abstract_init_matches(setup):
     # checkpoint restore builds its target with jax.eval_shape(init_state)
-    like = jax.eval_shape(lambda: step_lib.init_state(CFG, LAYOUT, C, jax.random.key(0)))
+    like = jax.eval_shape(lambda: train_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
     assert jax.tree_util.tree_structure(like) == jax.tree_util.tree_structure(setup["state0"])
-    g, d = nnx.eval_shape(lambda: step_lib.build_models(CFG, J, C, jax.random.key(0)))
+    g, d = nnx.eval_shape(lambda: train_state.build_models(CFG, J, C, jax.random.key(0)))
     n_g = sum(x.size for x in jax.tree_util.tree_leaves(setup["state0"].g_params))
     assert sum(x.size for x in jax.tree_util.tree_leaves(nnx.state(g, nnx.Param))) == n_g
 
@@ -137,7 +137,7 @@ def test_d_loss_does_not_reach_the_fake(setup):
 
     def d_total(d_params, fake_vel, fake_pose):
         d = nnx.merge(s0.d_def, d_params, s0.d_sn_state, copy=True)
-        return step_lib.d_losses(d, fake_vel, fake_pose, batch["root_BxTx3"], batch["pose_BxTxR"],
+        return objectives.d_losses(d, fake_vel, fake_pose, batch["root_BxTx3"], batch["pose_BxTxR"],
                                  batch["label_B"], CFG.train)["d_total"]
 
     g_d, g_vel, g_pose = jax.jit(jax.grad(d_total, argnums=(0, 1, 2))).lower(
@@ -199,9 +199,9 @@ def test_generator_apply_paths_agree(setup):
     labels = jnp.array([0, 2], jnp.int32)
 
     def both(state, vel, labels):
-        w = step_lib.latent_w(state, labels)  # z = 0
-        by_w = step_lib.generator_apply(state, vel, w_BxD=w)
-        by_label = step_lib.generator_apply(state, vel, labels)
+        w = inference.latent_w(state, labels)  # z = 0
+        by_w = inference.generator_apply(state, vel, w_BxD=w)
+        by_label = inference.generator_apply(state, vel, labels)
         return w, by_w, by_label
 
     w, by_w, by_label = jax.jit(both).lower(s3, vel, labels).compile(compiler_options=FAST)(s3, vel, labels)
@@ -212,7 +212,7 @@ def test_generator_apply_paths_agree(setup):
 
 
 def test_fake_labels_and_z():
-    labels, z = step_lib.sample_labels_and_z(CFG, C, 64, jax.random.key(0))
+    labels, z = objectives.sample_labels_and_z(CFG, C, 64, jax.random.key(0))
     assert labels.dtype == jnp.int32 and int(labels.min()) >= 0 and int(labels.max()) < C
     assert len(set(np.asarray(labels).tolist())) == C
     assert float(jnp.std(z)) > 0.5
@@ -222,16 +222,16 @@ def test_fake_labels_and_z():
 def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     """model.output_prior: the same parameters as the paper's G, whose outputs
     gain exactly the rest pose (pose head) and the input curve velocity (root head)."""
-    from motiongan_jax import curves, synthetic
-    from motiongan_jax.representation import layout_from_skeleton, rest_positions
+    from motiongan_jax.data import curves, synthetic
+    from motiongan_jax.motion.representation import layout_from_skeleton, rest_positions
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=4, w_dim=8, z_dim=8)))
     prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior=True))
     # the modules themselves (eager, no compile): same key, same parameters
-    rows = step_lib.output_prior_rows(prior_cfg.model, layout)
-    plain = step_lib._build_g(plain_cfg.model, layout.num_rel_joints, C, None, jax.random.key(3))
-    prior = step_lib._build_g(prior_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    rows = train_state.output_prior_rows(prior_cfg.model, layout)
+    plain = train_state._build_g(plain_cfg.model, layout.num_rel_joints, C, None, jax.random.key(3))
+    prior = train_state._build_g(prior_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
     assert _leaves_equal(nnx.state(plain, nnx.Param), nnx.state(prior, nnx.Param))
     curve = _batch()["curve_BxTx3"]
     w = plain.style(jnp.array([0, 2], jnp.int32), jnp.zeros((B, 8)))
@@ -252,16 +252,16 @@ def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
     """model.g_frame = curve: same parameters as the world-frame G; rotating the input curve by
     any angle rotates root velocity and pose by that angle (the world-frame G is not); at
     initialisation, with the rest-pose prior, the body faces along the curve's smoothed heading."""
-    from motiongan_jax import curves, synthetic
-    from motiongan_jax.representation import layout_from_skeleton
+    from motiongan_jax.data import curves, synthetic
+    from motiongan_jax.motion.representation import layout_from_skeleton
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     world_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
                                 model=ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True)))
     curve_cfg = dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="curve"))
-    rows = step_lib.output_prior_rows(world_cfg.model, layout)
-    world = step_lib._build_g(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
-    g = step_lib._build_g(curve_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    rows = train_state.output_prior_rows(world_cfg.model, layout)
+    world = train_state._build_g(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    g = train_state._build_g(curve_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
     assert _leaves_equal(nnx.state(world, nnx.Param), nnx.state(g, nnx.Param))
     # a turning path (quarter circle) walked at 1.2 m/s, 15 samples per second
     arc = jnp.linspace(0.0, np.pi / 2, T)
@@ -297,8 +297,8 @@ def test_projection_d_judges_each_window_as_its_label():
     from motiongan_jax.nn.layers import leaky_relu
 
     cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, d_cond=True)))
-    d = step_lib._build_d(cfg.model, T, J, C, jax.random.key(0))
-    d0 = step_lib._build_d(CFG.model, T, J, C, jax.random.key(0))
+    d = train_state._build_d(cfg.model, T, J, C, jax.random.key(0))
+    d0 = train_state._build_d(CFG.model, T, J, C, jax.random.key(0))
     shared = {k: v for k, v in nnx.to_pure_dict(nnx.state(d, nnx.Param)).items() if k != "l_proj"}
     assert _leaves_equal(shared, nnx.to_pure_dict(nnx.state(d0, nnx.Param)))
     batch = _batch()
@@ -316,14 +316,14 @@ def test_projection_d_judges_each_window_as_its_label():
         d(vel, pose, update_stats=False)
     # d_losses: the fakes' verdict follows fake_labels_B; the paper's D ignores them
     def fake_term(model_cfg, fake_labels):
-        dd = step_lib._build_d(model_cfg, T, J, C, jax.random.key(0))
-        return float(step_lib.d_losses(dd, vel, pose, batch["root_BxTx3"], pose, batch["label_B"], cfg.train,
+        dd = train_state._build_d(model_cfg, T, J, C, jax.random.key(0))
+        return float(objectives.d_losses(dd, vel, pose, batch["root_BxTx3"], pose, batch["label_B"], cfg.train,
                                        jnp.array(fake_labels, jnp.int32))["d_adv_fake"])
     assert abs(fake_term(cfg.model, [2, 3]) - fake_term(cfg.model, [0, 1])) > 1e-4
     assert fake_term(CFG.model, [2, 3]) == fake_term(CFG.model, [0, 1])
     # and the whole step trains with it
-    state = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    train_step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, jax.random.key(7)).compile(
+    state = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    train_step = jax.jit(step_lib_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, jax.random.key(7)).compile(
         compiler_options=FAST)
     state, metrics = train_step(state, batch, jax.random.key(7))
     assert all(np.isfinite(float(v)) for v in metrics.values())
@@ -333,9 +333,9 @@ def test_projection_d_judges_each_window_as_its_label():
 
 
 def test_project_bones_by_hand_and_identity_on_valid_poses():
-    from motiongan_jax import synthetic
+    from motiongan_jax.data import synthetic
     from motiongan_jax.nn.generator import project_bones
-    from motiongan_jax.representation import layout_from_skeleton, rest_positions
+    from motiongan_jax.motion.representation import layout_from_skeleton, rest_positions
 
     # root -> 1 (length 2) -> 2 (length 1); raw rows r1 = (0, 3, 4), r2 = r1 + (5, 0, 0)
     raw = jnp.array([[[0.0, 3.0, 4.0, 5.0, 3.0, 4.0]]])
@@ -348,8 +348,8 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
     # a model with exact bones: any w, any curve, every bone has the skeleton's length
     cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
                           model=ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True, exact_bones=True)))
-    g = step_lib._build_g(cfg.model, layout.num_rel_joints, C, step_lib.output_prior_rows(cfg.model, layout),
-                          jax.random.key(1), bones=step_lib.generator_bones(cfg.model, layout))
+    g = train_state._build_g(cfg.model, layout.num_rel_joints, C, train_state.output_prior_rows(cfg.model, layout),
+                          jax.random.key(1), bones=train_state.generator_bones(cfg.model, layout))
     vel = jax.random.normal(jax.random.key(2), (B, T, 3)) * jnp.array([0.1, 0.0, 0.1])
     _, pose = g(vel, 3.0 * jax.random.normal(jax.random.key(4), (B, 8)))
     joints = np.concatenate([np.zeros((B, T, 1, 3)), np.asarray(pose).reshape(B, T, -1, 3)], 2)
@@ -386,12 +386,12 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     dc1_0, and a stride head is added, every other parameter is as before; the offset moves the
     motion, None means 0, a G without the phase refuses offsets; the stride is exp of the head
     (1 m at init); G stays exactly rotation-equivariant in the curve frame."""
-    from motiongan_jax import curves
+    from motiongan_jax.data import curves
     from motiongan_jax.nn.generator import PHASE_CHANNELS
 
     base = ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True, g_frame="curve")
-    plain = step_lib._build_g(base, J, C, None, jax.random.key(3))
-    g = step_lib._build_g(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
+    plain = train_state._build_g(base, J, C, None, jax.random.key(3))
+    g = train_state._build_g(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
     p_plain = dict(nnx.to_flat_state(nnx.state(plain, nnx.Param)))
     p_phase = dict(nnx.to_flat_state(nnx.state(g, nnx.Param)))
     assert set(p_phase) - set(p_plain) == {("stride_head", "kernel"), ("stride_head", "bias")}
@@ -425,8 +425,8 @@ def test_root_height_head_gives_the_velocity_as_a_difference():
     (v[0] = v[1], the velocity convention), so integrating it gives that height back up to a
     constant; x and z are the velocity head's, as without the option."""
     base = ModelConfig(top=4, w_dim=8, z_dim=8)
-    g_vel = step_lib._build_g(base, J, C, None, jax.random.key(3))
-    g_h = step_lib._build_g(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
+    g_vel = train_state._build_g(base, J, C, None, jax.random.key(3))
+    g_h = train_state._build_g(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
     vel = 0.1 * jax.random.normal(jax.random.key(1), (B, T, 3))
     w = g_vel.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
     head, pose = g_vel(vel, w)  # the same parameters: this y is the height head's output
@@ -439,7 +439,7 @@ def test_root_height_head_gives_the_velocity_as_a_difference():
 
 
 def _gait_cfg():
-    from motiongan_jax.data import GaitTargets
+    from motiongan_jax.data.dataset import GaitTargets
 
     cfg = validate(dataclasses.replace(
         CFG, model=dataclasses.replace(CFG.model, top=4, g_frame="curve", gait_phase=True, root_height=True,
@@ -450,19 +450,19 @@ def _gait_cfg():
 
 def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head():
     cfg, gait = _gait_cfg()
-    assert step_lib.sample_phase(CFG, B, jax.random.key(0)) is None
-    ph = step_lib.sample_phase(cfg, 1000, jax.random.key(0))
+    assert objectives.sample_phase(CFG, B, jax.random.key(0)) is None
+    ph = objectives.sample_phase(cfg, 1000, jax.random.key(0))
     chex.assert_shape(ph, (1000,))
     assert float(ph.min()) >= 0.0 and float(ph.max()) < 2 * np.pi and abs(float(ph.mean()) - np.pi) < 0.2
     # the offsets come from their own stream: labels and z are those of a config without them
-    assert _leaves_equal(step_lib.sample_labels_and_z(cfg, C, B, jax.random.key(5)),
-                         step_lib.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
+    assert _leaves_equal(objectives.sample_labels_and_z(cfg, C, B, jax.random.key(5)),
+                         objectives.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
     with pytest.raises(ValueError, match="need gait targets"):
-        step_lib.make_train_step(cfg, LAYOUT, C)
+        step_lib_lib.make_train_step(cfg, LAYOUT, C)
     with pytest.raises(ValueError, match="3 stride lengths for 4 styles"):
-        step_lib.make_train_step(cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
-    state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, _batch(), jax.random.key(1)).compile(
+        step_lib_lib.make_train_step(cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
+    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    step = jax.jit(step_lib_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, _batch(), jax.random.key(1)).compile(
         compiler_options=FAST)
     state, m = step(state0, _batch(), jax.random.key(1))
     chex.assert_tree_all_finite(m)
@@ -473,8 +473,8 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
     # gradient is that of mean((log λ - log target)²) by hand, and Adam's first step is -lr·sign(g)
     from motiongan_jax.nn.generator import STRIDE_GAIN
 
-    labels, z = step_lib.sample_labels_and_z(cfg, C, B, jax.random.key(1))
-    g0 = step_lib.generator(state0)
+    labels, z = objectives.sample_labels_and_z(cfg, C, B, jax.random.key(1))
+    g0 = inference.generator(state0)
     w = np.asarray(g0.style(labels, z))
     err = np.asarray(g0.log_stride(jnp.asarray(w))) - np.log(np.asarray(gait.stride_m_C))[np.asarray(labels)]
     assert float(m["g_stride"]) == pytest.approx(np.mean(err**2), rel=1e-5)
@@ -490,8 +490,9 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
 def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
     # The step's g_rec and g_root_jerk recomputed outside it, from G before the update: the first
     # window asks for its own style at its own phase, with z = 0 or with the z drawn for it.
-    from motiongan_jax import curves, losses
-    from motiongan_jax.representation import LENGTH_UNIT_M
+    from motiongan_jax.data import curves
+    from motiongan_jax.train import losses
+    from motiongan_jax.motion.representation import LENGTH_UNIT_M
 
     cfg0, gait = _gait_cfg()
     batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
@@ -502,20 +503,20 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
     for rec_z in ("zero", "sampled"):
         cfg = validate(dataclasses.replace(cfg0, train=dataclasses.replace(
             cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0)))
-        state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
+        state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
         # at init w barely depends on z: a larger latent transform lets the two choices differ
         g_params = jax.tree.map(lambda x: x, state0.g_params)
         g_params["latent"] = jax.tree.map(lambda x: 10.0 * x, g_params["latent"])
         state0 = state0.replace(g_params=g_params)
-        _, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, key).compile(
+        _, m = jax.jit(step_lib_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, key).compile(
             compiler_options=FAST)(state0, batch, key)
-        labels, z = step_lib.sample_labels_and_z(cfg, C, B, key)
+        labels, z = objectives.sample_labels_and_z(cfg, C, B, key)
         labels = labels.at[0].set(batch["label_B"][0])
         if rec_z == "zero":
             z = z.at[0].set(0.0)
-        g = step_lib.generator(state0)
+        g = inference.generator(state0)
         w = g.style(labels, z)
-        offset = step_lib.sample_phase(cfg, B, key)
+        offset = objectives.sample_phase(cfg, B, key)
         phase_BxT = g.walked_phase(curve_vel, w, offset).at[0].set(batch["phase_BxT"][0])
         root_vel, pose = g(curve_vel, w, offset, phase_BxT)
         want_rec = losses.reconstruction_loss(root_vel[:1], pose[:1], real_vel[:1], batch["pose_BxTxR"][:1],
@@ -533,12 +534,12 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
     decay = 0.75
     plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4)))
     cfg = validate(dataclasses.replace(plain_cfg, train=dataclasses.replace(plain_cfg.train, g_ema_decay=decay)))
-    state0 = step_lib.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    assert step_lib.init_state(plain_cfg, LAYOUT, C, jax.random.key(0)).g_ema_params is None
+    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    assert train_state.init_state(plain_cfg, LAYOUT, C, jax.random.key(0)).g_ema_params is None
     assert _leaves_equal(state0.g_ema_params, state0.g_params)
 
     def compiled(c, s):
-        return jax.jit(step_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
+        return jax.jit(step_lib_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
             compiler_options=FAST)
 
     # (that the average never feeds back, training being that of a run without it, is checked bit
@@ -557,11 +558,11 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
         np.testing.assert_allclose(np.asarray(got), exp, rtol=1e-6, atol=1e-7)
     assert not _leaves_equal(state.g_ema_params, state.g_params)
     # generation takes the average unless asked for the raw parameters
-    assert _leaves_equal(step_lib.inference_state(state).g_params, state.g_ema_params)
-    assert _leaves_equal(step_lib.inference_state(state, "raw").g_params, state.g_params)
-    assert step_lib.inference_state(plain) is plain
+    assert _leaves_equal(train_state.inference_state(state).g_params, state.g_ema_params)
+    assert _leaves_equal(train_state.inference_state(state, "raw").g_params, state.g_params)
+    assert train_state.inference_state(plain) is plain
     with pytest.raises(ValueError, match="'ema' or 'raw'"):
-        step_lib.inference_state(state, "average")
+        train_state.inference_state(state, "average")
     # a state and a step that disagree about the average are refused at trace time
     with pytest.raises(ValueError, match="g_ema_decay"):
-        jax.eval_shape(step_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))
+        jax.eval_shape(step_lib_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))

@@ -1,4 +1,4 @@
-"""The embedded default dataset (motiongan_jax/synthetic.py): skeleton, determinism, physical
+"""The embedded default dataset (motiongan_jax/data/synthetic.py): skeleton, determinism, physical
 sanity of the walks measured through forward kinematics, recoverable style parameters, and the
 on-disk dataset."""
 
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from expected import CMU_NAMES
-from motiongan_jax import bvh, kinematics, synthetic
-from motiongan_jax.representation import layout_from_skeleton
+from motiongan_jax.motion import bvh, kinematics
+from motiongan_jax.data import synthetic
+from motiongan_jax.motion.representation import layout_from_skeleton
 
 U = synthetic.UNITS_TO_M
 FPS = 60.0

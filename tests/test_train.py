@@ -17,7 +17,9 @@ import numpy as np
 import pytest
 
 from conftest import assert_bit_identical, load_cli, run_cli
-from motiongan_jax import checkpoint, curves, data, step as step_lib, train as train_lib
+from motiongan_jax.train import checkpoint, loop as train_lib
+from motiongan_jax.data import curves, dataset as data
+from motiongan_jax.train import inference
 from motiongan_jax.config import override, to_dict
 
 
@@ -144,12 +146,12 @@ def test_labels_keep_their_embeddings_and_g_follows_its_code_after_training(unbr
     emb_CxZ = np.asarray(state.g_params["latent"]["embed"])
     gap = min(np.abs(emb_CxZ[a] - emb_CxZ[b]).max() for a in range(C) for b in range(a))
     assert gap > 0.05 * np.abs(emb_CxZ).max(), gap  # random init, moved by 4 Adam steps of 2e-4 at most
-    w_CxD = np.asarray(step_lib.latent_w(state, jax.numpy.arange(C)))
+    w_CxD = np.asarray(inference.latent_w(state, jax.numpy.arange(C)))
     # a step of 0.1 along w1 - w0 (the codes' spread in a longer run) moves the pose by 0.82-1.13 of
     # its size (5 seeds, SSE4.2 kernels), far from the 0.1 asked
     vel = curves.velocity(jax.numpy.asarray(train_lib.preview_curve(T, 0.08))[None]).repeat(2, 0)
     u = (w_CxD[1] - w_CxD[0]) / np.linalg.norm(w_CxD[1] - w_CxD[0])
-    _, pose = step_lib.generator_apply(state, vel, w_BxD=jax.numpy.asarray(np.stack([w_CxD[0], w_CxD[0] + 0.1 * u])))
+    _, pose = inference.generator_apply(state, vel, w_BxD=jax.numpy.asarray(np.stack([w_CxD[0], w_CxD[0] + 0.1 * u])))
     diff = float(np.abs(pose[0] - pose[1]).mean() / np.abs(pose[0]).mean())
     assert diff > 0.1, diff
 

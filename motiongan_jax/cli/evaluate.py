@@ -34,8 +34,12 @@ def main(argv=None) -> int:
                     help="synthetic curve shapes (comma-separated)")
     args = ap.parse_args(argv)
 
-    from motiongan_jax import checkpoint, curves, data, evaluation, evaluator, generate
-    from motiongan_jax.bvh import BVHError
+    from motiongan_jax.train import checkpoint
+    from motiongan_jax.data import curves, dataset as data
+    from motiongan_jax.evaluation import evaluator
+    from motiongan_jax.evaluation import protocol, report as eval_report
+    from motiongan_jax.generate import limits
+    from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.config import ConfigError
 
     try:
@@ -49,18 +53,18 @@ def main(argv=None) -> int:
         bad = [s for s in shapes if s not in curves.SHAPES]
         if bad:
             raise ConfigError(f"--shapes: unknown shape(s) {bad}; known: {', '.join(curves.SHAPES)}")
-        settings = evaluation.Settings(seeds=seeds, k=args.k, max_heldout_curves=args.max_curves,
+        settings = protocol.Settings(seeds=seeds, k=args.k, max_heldout_curves=args.max_curves,
                                        search_steps=args.search_steps, search_clips=1 if args.search_steps > 0 else 0)
-        report, ctx = evaluation.evaluate_run(args.workdir, settings, shapes, step=args.step, params=args.params,
+        report, ctx = protocol.evaluate_run(args.workdir, settings, shapes, step=args.step, params=args.params,
                                               data_dir=args.data, evaluator_path=args.evaluator,
                                               cmu_curves=args.cmu_curves)
     except (ConfigError, data.DataError, BVHError, checkpoint.CheckpointError, evaluator.EvaluatorError,
-            evaluation.EvaluationError, generate.GenerateError) as err:
+            protocol.EvaluationError, limits.GenerateError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
 
     out = Path(args.out)
-    digest = evaluation.write_report(out, report, ctx)
+    digest = eval_report.write_report(out, report, ctx)
     print(f"wrote {out / 'report.md'}, report.json, confusion.png, pca_w.png")
     print(f"evaluator checksum {ctx.ev.checksum[:16]}…, {digest[:12]}")
     return 0

@@ -20,7 +20,7 @@ the training skeleton's joints, or exact, every bone direction exact through zer
 joints), .npz (joint positions in metres and metadata), .gif, .mp4 (needs ffmpeg or
 imageio-ffmpeg), .png (pose strips). Several motions: .bvh/.npz get one file each (OUT_0.bvh,
 ...), .gif/.mp4/.png show them side by side. The whole curve is walked (up to the limits in
-motiongan_jax/generate.py: 10 km, 36,000 samples); long ones go through G in chunks, with a
+motiongan_jax/generate/: 10 km, 36,000 samples); long ones go through G in chunks, with a
 progress line on stderr when that takes more than a few seconds.
 --figure styles|interp|arith: the paper's Fig. 4 (--style "A,B,C" or all styles), Fig. 6
 (--style "A,B": α = 0, 1/4, 1/2, 3/4, 1) and Fig. 7 (--style "A - B + C": operands and result).
@@ -79,11 +79,13 @@ def main(argv=None) -> int:
                          "children best-fit; exact: every bone direction exact, zero-length branch joints added")
     args = ap.parse_args(argv)
 
-    from motiongan_jax import checkpoint, curves, generate as gen_lib, pretrained
-    from motiongan_jax.bvh import BVHError
-    from motiongan_jax.ik import IKError
+    from motiongan_jax.train import checkpoint, pretrained
+    from motiongan_jax.data import curves
+    from motiongan_jax.generate import limits, styles, user_curves, walk, writers
+    from motiongan_jax.motion.bvh import BVHError
+    from motiongan_jax.motion.ik import IKError
 
-    errors = (gen_lib.GenerateError, checkpoint.CheckpointError, curves.DegenerateCurveError,
+    errors = (limits.GenerateError, checkpoint.CheckpointError, curves.DegenerateCurveError,
               curves.CurveFileError, BVHError, IKError, OSError)
     try:
         if args.list_styles:
@@ -94,27 +96,27 @@ def main(argv=None) -> int:
             missing.insert(0, "--style")
         if missing:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
-        gen_lib.check_output_path(args.out)  # fail before the model is loaded
+        writers.check_output_path(args.out)  # fail before the model is loaded
         z_arg = args.z
         state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
         names = list(meta["style_names"])
         if args.figure:
-            panels = gen_lib.figure_specs(args.figure, args.style, names, args.seed)
+            panels = styles.figure_specs(args.figure, args.style, names, args.seed)
         else:
-            spec = gen_lib.parse_style(args.style, names, args.seed)
+            spec = styles.parse_style(args.style, names, args.seed)
             panels = [(spec.text, spec)]
-        z = gen_lib.z_codes(state, z_arg, args.seed)
-        rate = gen_lib.sample_rate(meta, cfg)
-        curve = gen_lib.load_curve(args.curve, length=args.length, scale=args.scale,
+        z = styles.z_codes(state, z_arg, args.seed)
+        rate = walk.sample_rate(meta, cfg)
+        curve = user_curves.load_curve(args.curve, length=args.length, scale=args.scale,
                                    control_seconds=cfg.data.control_point_interval / float(meta["fps"]))
-        curve_M = gen_lib.prepare_curve(curve, rate, args.speed, log=_log)
+        curve_M = user_curves.prepare_curve(curve, rate, args.speed, log=_log)
         count = len(panels) * len(z)
-        gen_lib.check_output_size(args.out, len(curve_M), count)  # before any work
-        w = gen_lib.spec_codes(state, [s for _, s in panels], names, z)
+        writers.check_output_size(args.out, len(curve_M), count)  # before any work
+        w = styles.spec_codes(state, [s for _, s in panels], names, z)
         titles = [t if len(z) == 1 else f"{t} z{k}" for t, _ in panels for k in range(len(z))]
         zs = [z[k] for _ in panels for k in range(len(z))]
-        generated = gen_lib.generate_motion(state, layout, curve_M, w, progress=Progress())
-        paths = gen_lib.write_outputs(args.out, generated, titles, layout, rate, bvh_units=args.bvh_units,
+        generated = walk.generate_motion(state, layout, curve_M, w, progress=Progress())
+        paths = writers.write_outputs(args.out, generated, titles, layout, rate, bvh_units=args.bvh_units,
                                       bvh_hierarchy=args.bvh_hierarchy, z_per_motion=zs, log=_log)
     except errors as err:
         print(f"error: {err}", file=sys.stderr)

@@ -24,7 +24,12 @@ def main(argv=None) -> int:
 
     import dataclasses
 
-    from motiongan_jax import checkpoint, data, evaluation, generate, representation, viz
+    from motiongan_jax.train import checkpoint
+    from motiongan_jax.data import dataset as data
+    from motiongan_jax.motion import representation
+    from motiongan_jax import viz
+    from motiongan_jax.evaluation import clip_metrics
+    from motiongan_jax.generate import limits, walk
     from motiongan_jax.config import ConfigError
 
     try:
@@ -37,15 +42,15 @@ def main(argv=None) -> int:
         if not dataset.val:
             raise data.DataError("the validation split is empty: no held-out clip to compare with")
         feet = representation.foot_joints(layout)
-        rate = generate.sample_rate(meta, cfg)
-        traces = evaluation.gait_traces(state, cfg, layout, dataset.val, tuple(meta["style_names"]), feet, rate,
+        rate = walk.sample_rate(meta, cfg)
+        traces = clip_metrics.gait_traces(state, cfg, layout, dataset.val, tuple(meta["style_names"]), feet, rate,
                                         args.seconds)
         if not traces:
             raise data.DataError("no held-out clip is long enough for a trace")
         contact = data.contact_height(dataset.train, layout, feet)
         viz.plot_gait(traces, args.out, sample_rate=rate, contact_height_m=contact,
                       title=f"{cfg.name}: toe heights above the floor, real held-out clips and G on their paths")
-    except (ConfigError, data.DataError, checkpoint.CheckpointError, generate.GenerateError, ValueError) as err:
+    except (ConfigError, data.DataError, checkpoint.CheckpointError, limits.GenerateError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"wrote {args.out}")

@@ -22,11 +22,11 @@ def main(argv=None) -> int:
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
 
-    from motiongan_jax import pretrained
-    from motiongan_jax.checkpoint import CheckpointError
+    from motiongan_jax.train import pretrained
+    from motiongan_jax.train.checkpoint import CheckpointError
     from motiongan_jax.config import ConfigError, from_dict, validate
-    from motiongan_jax.data import DataError
-    from motiongan_jax.train import train
+    from motiongan_jax.data.dataset import DataError
+    from motiongan_jax.train.loop import train
 
     try:
         target = pretrained.read_export(pretrained.SHIPPED_MODEL if args.model is None else args.model)

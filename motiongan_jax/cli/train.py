@@ -35,11 +35,11 @@ def main(argv=None) -> int:
     ap.add_argument("--process-id", type=int, default=None)
     args = ap.parse_args(argv)
 
-    from motiongan_jax.bvh import BVHError
-    from motiongan_jax.checkpoint import CheckpointError
+    from motiongan_jax.motion.bvh import BVHError
+    from motiongan_jax.train.checkpoint import CheckpointError
     from motiongan_jax.config import ConfigError, load_config, override, validate
-    from motiongan_jax.data import DataError
-    from motiongan_jax.parallel import DistributedError
+    from motiongan_jax.data.dataset import DataError
+    from motiongan_jax.train.parallel import DistributedError
 
     try:
         cfg = load_config(args.config, check=False)
@@ -52,12 +52,12 @@ def main(argv=None) -> int:
             sets.append(f"train.num_steps={args.steps}")
         cfg = validate(override(cfg, sets), need_data=not args.dry_run)
         if args.dry_run:
-            from motiongan_jax.summary import describe
+            from motiongan_jax.train.summary import describe
 
             print(describe(cfg))
             return 0
-        from motiongan_jax import parallel
-        from motiongan_jax.train import NonFiniteError, train
+        from motiongan_jax.train import parallel
+        from motiongan_jax.train.loop import NonFiniteError, train
 
         # several processes: from the flags, the variables or the launcher (docs/PERFORMANCE.md)
         parallel.initialize_distributed(args.coordinator, args.num_processes, args.process_id)

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from motiongan_jax import curves
-from motiongan_jax import generate as gen_lib
+from motiongan_jax.data import curves
+from motiongan_jax.generate import styles as styles_lib, user_curves, walk, writers
 
 # Limits the server enforces on every request (each breach is a 400 naming it): an interactive
 # page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
@@ -147,7 +147,7 @@ def parse_request(body) -> Request:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Result:
-    generated: gen_lib.Generated  # cut to the curve's samples
+    generated: walk.Generated  # cut to the curve's samples
     titles: tuple[str, ...]
     z_per_motion: np.ndarray  # (B, z_dim)
     notes: tuple[str, ...]
@@ -166,7 +166,7 @@ class Engine:
     def __init__(self, state, meta: dict, cfg, layout, title: str = "", details: str = ""):
         self.state, self.meta, self.cfg, self.layout = state, meta, cfg, layout
         self.style_names = list(meta["style_names"])
-        self.rate = gen_lib.sample_rate(meta, cfg)
+        self.rate = walk.sample_rate(meta, cfg)
         self.title, self.details = title, details
         self._warm = threading.Event()
         self._codes: collections.OrderedDict = collections.OrderedDict()
@@ -177,7 +177,7 @@ class Engine:
         return {
             "model": self.title, "model_details": self.details, "style_names": self.style_names,
             "joint_names": list(self.layout.joint_names), "parents": list(self.layout.parents),
-            "fps": self.rate, "default_speed": gen_lib.DEFAULT_SPEED_M_PER_S, "shapes": list(curves.SHAPES),
+            "fps": self.rate, "default_speed": user_curves.DEFAULT_SPEED_M_PER_S, "shapes": list(curves.SHAPES),
             "limits": {"max_points": MAX_POINTS, "max_path_m": MAX_PATH_M, "max_styles": MAX_STYLES,
                        "max_samples_z": MAX_SAMPLES_Z, "max_motions": MAX_MOTIONS,
                        "max_samples": SAMPLE_BUCKETS[-1], "speed_m_per_s": list(SPEED_RANGE_M_PER_S),
@@ -192,12 +192,12 @@ class Engine:
         spec = self._spec(text, 0)
         return {"kind": spec.kind, "text": spec.text, "terms": [[n, c] for n, c in spec.terms]}
 
-    def _spec(self, text: str, seed: int) -> gen_lib.StyleSpec:
+    def _spec(self, text: str, seed: int) -> styles_lib.StyleSpec:
         # a .npy/.txt w file would be read from the server's disk: not from a web page
         if text.strip().lower().endswith((".npy", ".txt")):
-            raise gen_lib.StyleError(f"style {text!r}: w files are not accepted by the demo (use "
+            raise styles_lib.StyleError(f"style {text!r}: w files are not accepted by the demo (use "
                                      "bin/generate.py); give a name, a mix or an expression")
-        return gen_lib.parse_style(text, self.style_names, seed)
+        return styles_lib.parse_style(text, self.style_names, seed)
 
     def shape(self, name, length=None, scale=2.0) -> np.ndarray:
         """A built-in shape's floor points (generate.load_curve), at most a few hundred."""
@@ -209,7 +209,7 @@ class Engine:
             raise RequestError(f"'length' must be in (0, {MAX_PATH_M:g}] m, got {length:g}")
         if not 0 < scale <= MAX_PATH_M:
             raise RequestError(f"'scale' must be in (0, {MAX_PATH_M:g}] m, got {scale:g}")
-        pts = gen_lib.load_curve(name, length=length, scale=scale).points
+        pts = user_curves.load_curve(name, length=length, scale=scale).points
         total = float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
         if total > MAX_PATH_M:
             raise RequestError(f"shape {name} at scale {scale:g} m is {total:.1f} m long; the demo "
@@ -219,15 +219,15 @@ class Engine:
     # -- generation -----------------------------------------------------------------------------
     def run(self, req: Request) -> Result:
         specs = [self._spec(s, req.seed) for s in req.styles]
-        z = gen_lib.z_codes(self.state, req.z, req.seed)
+        z = styles_lib.z_codes(self.state, req.z, req.seed)
         if len(specs) * len(z) > MAX_MOTIONS:
             raise RequestError(f"{len(specs)} styles x {len(z)} samples = {len(specs) * len(z)} "
                                f"motions; the demo makes at most {MAX_MOTIONS} at once")
         notes: list[str] = []
-        curve_T = gen_lib.prepare_curve(gen_lib.Curve(req.points, "path"), self.rate, req.speed, log=notes.append)
+        curve_T = user_curves.prepare_curve(user_curves.Curve(req.points, "path"), self.rate, req.speed, log=notes.append)
         T = len(curve_T)
         if T > SAMPLE_BUCKETS[-1]:
-            speed = req.speed or gen_lib.DEFAULT_SPEED_M_PER_S
+            speed = req.speed or user_curves.DEFAULT_SPEED_M_PER_S
             raise RequestError(f"path: {T} samples at {speed:g} m/s ({T / self.rate:.0f} s of walking); "
                                f"the demo walks at most {SAMPLE_BUCKETS[-1]} "
                                f"({SAMPLE_BUCKETS[-1] / self.rate:.0f} s): draw a shorter path or walk faster")
@@ -235,12 +235,12 @@ class Engine:
         B = len(w)
         Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
         w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
-        full = gen_lib.generate_motion(self.state, self.layout, gen_lib.extend_straight(curve_T, Tb - T), w_pad)
+        full = walk.generate_motion(self.state, self.layout, walk.extend_straight(curve_T, Tb - T), w_pad)
         raw = full.positions[:B, :T].copy()
         raw[..., 1] -= full.floor_shift_m[:B, None, None]
-        shift = gen_lib.floor_shift(raw)
+        shift = walk.floor_shift(raw)
         raw[..., 1] += shift[:, None, None]
-        cut = gen_lib.Generated(raw, full.root_velocity[:B, :T], full.pose[:B, :T], curve_T, w, shift)
+        cut = walk.Generated(raw, full.root_velocity[:B, :T], full.pose[:B, :T], curve_T, w, shift)
         titles = tuple(t if len(z) == 1 else f"{t} z{k}" for t in (s.text for s in specs) for k in range(len(z)))
         zs = np.concatenate([z] * len(specs))
         return Result(cut, titles, zs, tuple(notes), Tb, Bb)
@@ -253,7 +253,7 @@ class Engine:
             if key in self._codes:
                 self._codes.move_to_end(key)
                 return self._codes[key]
-        w = gen_lib.spec_codes(self.state, specs, self.style_names, z)
+        w = styles_lib.spec_codes(self.state, specs, self.style_names, z)
         w.setflags(write=False)  # shared by the requests that hit the cache
         with self._codes_lock:
             self._codes[key] = w
@@ -299,12 +299,12 @@ class Engine:
             name = "motiongan_" + _safe_name("_".join(res.titles)) + ".gif"
         else:
             i = _int(body.get("index", 0), "'index'", 0, B - 1)
-            pick = gen_lib.Generated(g.positions[i:i + 1], g.root_velocity[i:i + 1], g.pose[i:i + 1],
+            pick = walk.Generated(g.positions[i:i + 1], g.root_velocity[i:i + 1], g.pose[i:i + 1],
                                      g.curve, g.w[i:i + 1], g.floor_shift_m[i:i + 1])
             titles, zs = (res.titles[i],), [res.z_per_motion[i]]
             name = f"motiongan_{_safe_name(res.titles[i])}.{fmt}"
         with tempfile.TemporaryDirectory(prefix="motiongan-demo-") as tmp:
-            paths = gen_lib.write_outputs(Path(tmp) / name, pick, titles, self.layout, self.rate,
+            paths = writers.write_outputs(Path(tmp) / name, pick, titles, self.layout, self.rate,
                                           z_per_motion=zs)
             return paths[0].read_bytes(), name, EXPORT_FORMATS[fmt]
 
@@ -317,7 +317,7 @@ class Engine:
         for b in batches:
             for T in (t for t in SAMPLE_BUCKETS if t <= max_samples):
                 # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
-                pts = np.array([[0.0, 0.0], [(T - 0.5) * gen_lib.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
+                pts = np.array([[0.0, 0.0], [(T - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
                 self.run(Request(pts, (name,) * b, "zero", 0, None))
         self._warm.set()
         return time.perf_counter() - t0

@@ -27,16 +27,16 @@ from pathlib import Path
 from flask import Flask, jsonify, request, send_from_directory
 from werkzeug.exceptions import HTTPException
 
-from motiongan_jax import curves
-from motiongan_jax import generate as gen_lib
+from motiongan_jax.data import curves
+from motiongan_jax.generate import limits
 from motiongan_jax.demo import engine as engine_lib
-from motiongan_jax.ik import IKError
+from motiongan_jax.motion.ik import IKError
 
 STATIC = Path(__file__).resolve().parent / "static"
 MAX_BODY_BYTES = 2 * 1024 * 1024
 MAX_CONCURRENT = 2
 QUEUE_TIMEOUT_S = 30.0
-BAD_INPUT = (engine_lib.RequestError, gen_lib.GenerateError, curves.DegenerateCurveError,
+BAD_INPUT = (engine_lib.RequestError, limits.GenerateError, curves.DegenerateCurveError,
              curves.CurveFileError, IKError)
 
 
@@ -133,7 +133,7 @@ def create_app(engine: engine_lib.Engine) -> Flask:
 
 
 def load_engine(workdir=None, model=None, step=None, params="ema") -> engine_lib.Engine:
-    from motiongan_jax import pretrained
+    from motiongan_jax.train import pretrained
 
     state, meta, cfg, layout = pretrained.load_model(workdir, step, params, model)
     if workdir is not None:
@@ -154,7 +154,7 @@ def _compilation_cache() -> None:
 
     if os.environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir:
         return
-    from motiongan_jax.data import cache_root
+    from motiongan_jax.data.dataset import cache_root
 
     jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
 
@@ -176,7 +176,7 @@ def main(argv=None) -> int:
 
     from werkzeug.serving import make_server
 
-    from motiongan_jax.checkpoint import CheckpointError
+    from motiongan_jax.train.checkpoint import CheckpointError
 
     _compilation_cache()
     try:

@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from motiongan_jax import atomic, bvh, kinematics
-from motiongan_jax.data import DataError, label_from_filename
-from motiongan_jax.representation import UNITS_TO_M
+from motiongan_jax import atomic
+from motiongan_jax.motion import bvh, kinematics
+from motiongan_jax.data.dataset import DataError, label_from_filename
+from motiongan_jax.motion.representation import UNITS_TO_M
 
 
 def export_positions(data_dir: str | Path, out: str | Path, labels: str = "paper",

@@ -30,7 +30,8 @@ import numpy as np
 import optax
 from flax import nnx
 
-from motiongan_jax import atomic, curves
+from motiongan_jax import atomic
+from motiongan_jax.data import curves
 
 FORMAT_VERSION = 1
 

@@ -37,9 +37,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax import atomic, checkpoint
+from motiongan_jax import atomic
+from motiongan_jax.train import checkpoint
 
-SHIPPED_MODEL = Path(__file__).resolve().parent / "weights" / "small.npz"
+SHIPPED_MODEL = Path(__file__).resolve().parent.parent / "weights" / "small.npz"
 FORMAT = "motiongan_jax inference export"
 VERSION = 1
 _PARAM_PREFIX = "g/"

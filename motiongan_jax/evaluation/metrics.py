@@ -22,8 +22,8 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from motiongan_jax import representation
-from motiongan_jax.representation import CMU_UNIT_M
+from motiongan_jax.motion import representation
+from motiongan_jax.motion.representation import CMU_UNIT_M
 
 # Reference foot-skate threshold (docs/DESIGN.md §5.4): 0.5 CMU units per 15 Hz sample, in metres.
 FOOT_SKATE_THRESHOLD_M = 0.5 * CMU_UNIT_M

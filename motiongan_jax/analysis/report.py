@@ -17,9 +17,12 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from motiongan_jax import analysis as A
-from motiongan_jax import atomic, curves, evaluation, pretrained, viz
-from motiongan_jax.representation import LENGTH_UNIT_M
+from motiongan_jax.analysis import clips, probe as probe_lib, search as search_lib, style_space
+from motiongan_jax import atomic, viz
+from motiongan_jax.data import curves
+from motiongan_jax.train import pretrained
+from motiongan_jax.evaluation import report as eval_report
+from motiongan_jax.motion.representation import LENGTH_UNIT_M
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,12 +60,12 @@ def _search_curve(text: str, spacing: float, T: int):
     path = Path(text)
     if path.suffix.lower() in (".csv", ".txt", ".json"):
         return curves.load_curve_file(path)
-    raise A.AnalysisError(f"--search-curve: {text!r} is neither a shape ({', '.join(curves.SHAPES)}) nor a "
+    raise style_space.AnalysisError(f"--search-curve: {text!r} is neither a shape ({', '.join(curves.SHAPES)}) nor a "
                           ".csv/.json curve file")
 
 
 def _write_json(path: Path, obj) -> None:
-    atomic.write_text(path, json.dumps(evaluation.to_jsonable(obj), indent=1, allow_nan=False) + "\n")
+    atomic.write_text(path, json.dumps(eval_report.to_jsonable(obj), indent=1, allow_nan=False) + "\n")
 
 
 def write_analysis(out, *, workdir=None, model=None, step: int | None = None, params: str = "ema", k: int = 10,
@@ -78,15 +81,15 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
     C = len(names)
     key = jax.random.key(seed)
     k_codes, k_search = jax.random.split(key)
-    codes = A.label_codes(state, names, k, k_codes)
+    codes = style_space.label_codes(state, names, k, k_codes)
     X, labels = codes.flat_samples
-    p = A.pca(X)
-    pts = A.pca_transform(p, X)
+    p = style_space.pca(X)
+    pts = style_space.pca_transform(p, X)
     two = (lambda a: np.asarray(a)[:, :2] if np.asarray(a).shape[1] >= 2 else
            np.pad(np.asarray(a), ((0, 0), (0, 2 - np.asarray(a).shape[1]))))
     evr = np.asarray(p.explained_variance_ratio_K)
-    dist = np.asarray(A.pairwise_distances(codes.centroids_CxD))
-    nearest = A.nearest_styles(dist, names, k=min(3, C - 1))
+    dist = np.asarray(style_space.pairwise_distances(codes.centroids_CxD))
+    nearest = style_space.nearest_styles(dist, names, k=min(3, C - 1))
 
     report = {
         "workdir": None if workdir is None else str(workdir),
@@ -102,28 +105,28 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
         "nearest": nearest,
         "centroids": np.asarray(codes.centroids_CxD), "w_zero": np.asarray(codes.zero_CxD),
     }
-    gait = A.gait_parameters(meta, cfg)
+    gait = probe_lib.gait_parameters(meta, cfg)
     if gait is not None and C >= 3:
         report["probe"] = {"targets": "gait parameters of the embedded dataset (styles.json)",
                            "method": "least squares with an intercept on the training fold's leading "
                                      "principal components; R² of out-of-fold predictions",
-                           **A.probe_report(codes, gait)}
+                           **probe_lib.probe_report(codes, gait)}
     else:
         report["probe"] = None
 
     marks = {}
     if search is not None:
         log(f"style search: {search.clip}")
-        target = A.motion_windows(search.clip, meta, cfg, layout, max_windows=search.windows, T=search.T)
-        found = A.search_motion(state, codes, target, num_random=search.random, keep=search.keep,
+        target = clips.motion_windows(search.clip, meta, cfg, layout, max_windows=search.windows, T=search.T)
+        found = search_lib.search_motion(state, codes, target, num_random=search.random, keep=search.keep,
                                 steps=search.steps, lr=search.lr, key=k_search)
         res = found["result"]
-        marks[f"search: {Path(search.clip).stem}"] = tuple(two(A.pca_transform(p, res.w_D[None]))[0])
-        rv, pose = A.reconstruct(state, target, res.w_D)
+        marks[f"search: {Path(search.clip).stem}"] = tuple(two(style_space.pca_transform(p, res.w_D[None]))[0])
+        rv, pose = search_lib.reconstruct(state, target, res.w_D)
         spacing = target.spacing_m
         height = float(np.mean(np.asarray(target.root_NxTx3[:, :, 1])))
         curve_pts = _search_curve(search.curve, spacing, cfg.data.window_T)
-        walk = A.generate_along(state, layout, res.w_D, curve_pts, spacing_m=spacing, start_height_m=height)
+        walk = search_lib.generate_along(state, layout, res.w_D, curve_pts, spacing_m=spacing, start_height_m=height)
         sample_rate = float(meta["fps"]) / cfg.data.frame_step
         stem = Path(search.clip).stem
         true_style = stem.split("_", 1)[0] if stem.split("_", 1)[0] in names else None
@@ -144,7 +147,7 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
                      "start_height_m": height},
         }
         if true_style is not None:
-            order = [n for n, _ in A.nearest_to(res.w_D, codes, k=C)]
+            order = [n for n, _ in search_lib.nearest_to(res.w_D, codes, k=C)]
             found_report["file_name_style_rank"] = order.index(true_style) + 1
         _write_json(out / "search.json", found_report)
         with atomic.atomic_path(out / "search.npz") as tmp, open(tmp, "wb") as fh:
@@ -158,10 +161,10 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
                             "final_loss": res.loss, "nearest": found["nearest"]}
 
     viz.plot_style_pca(two(pts), np.asarray(labels), names, out / "pca.png",
-                       centroids_Cx2=two(A.pca_transform(p, codes.centroids_CxD)),
-                       zero_Cx2=two(A.pca_transform(p, codes.zero_CxD)), explained=evr[:2], marks=marks,
+                       centroids_Cx2=two(style_space.pca_transform(p, codes.centroids_CxD)),
+                       zero_Cx2=two(style_space.pca_transform(p, codes.zero_CxD)), explained=evr[:2], marks=marks,
                        title=f"Style codes w, {C} styles x {k} (step {int(state.step)})")
     viz.plot_distance_heatmap(dist, names, out / "heatmap.png")
-    atomic.write_text(out / "nearest.md", A.nearest_markdown(nearest))
+    atomic.write_text(out / "nearest.md", style_space.nearest_markdown(nearest))
     _write_json(out / "analysis.json", report)
     return report

@@ -20,7 +20,7 @@ import dataclasses
 
 import numpy as np
 
-from motiongan_jax.bvh import Skeleton
+from motiongan_jax.motion.bvh import Skeleton
 
 # Metres per CMU unit: the paper's unit of length (its data were CMU mocap).
 CMU_UNIT_M = 0.056444

@@ -14,10 +14,11 @@ from __future__ import annotations
 import jax
 from flax import nnx
 
-from motiongan_jax import data, step as step_lib, synthetic
+from motiongan_jax.data import dataset as data, synthetic
+from motiongan_jax.train import state as train_state
 from motiongan_jax.nn import count_params
 from motiongan_jax.config import Config
-from motiongan_jax.representation import layout_from_skeleton
+from motiongan_jax.motion.representation import layout_from_skeleton
 
 
 def model_source(cfg: Config):
@@ -41,13 +42,13 @@ def model_source(cfg: Config):
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     return layout, styles, (
         f"no data given: CMU's skeleton (its 31-joint hierarchy as every CMU file has it, "
-        f"motiongan_jax/synthetic.py) and the {len(styles)} styles of {where}")
+        f"motiongan_jax/data/synthetic.py) and the {len(styles)} styles of {where}")
 
 
 def describe(cfg: Config) -> str:
     layout, style_names, source = model_source(cfg)
     num_styles = len(style_names)
-    g, d = nnx.eval_shape(lambda: step_lib.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
+    g, d = nnx.eval_shape(lambda: train_state.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
     lines = [
         f"config {cfg.name}: {source}",
         f"skeleton: {layout.num_joints} kept joints -> {layout.num_rows} rows; window T = {cfg.data.window_T}, "

@@ -63,7 +63,7 @@ import dataclasses
 
 import numpy as np
 
-from motiongan_jax import bvh
+from motiongan_jax.motion import bvh
 
 ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROOT_ORDER = "YXZ"
@@ -368,7 +368,7 @@ def positions_to_motion(positions_m, joint_names, parents, rest_offsets_m, frame
 
 def layout_positions(motion: bvh.Motion, ex: ExportSkeleton) -> np.ndarray:
     """FK of an exported motion at the layout's joints, (F, J, 3) metres."""
-    from motiongan_jax import kinematics
+    from motiongan_jax.motion import kinematics
 
     return kinematics.world_positions(motion)[:, list(ex.kept_index)] / ex.units_per_m
 

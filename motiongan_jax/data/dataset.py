@@ -21,9 +21,12 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, uniform_filter1d
 from scipy.signal import hilbert
 
-from motiongan_jax import atomic, bvh, curves, kinematics, metrics
+from motiongan_jax import atomic
+from motiongan_jax.motion import bvh, kinematics
+from motiongan_jax.data import curves
+from motiongan_jax.evaluation import metrics
 from motiongan_jax.config import DataConfig
-from motiongan_jax.representation import UNITS_TO_M, RowLayout, foot_joints, from_rows, layout_from_skeleton, to_rows
+from motiongan_jax.motion.representation import UNITS_TO_M, RowLayout, foot_joints, from_rows, layout_from_skeleton, to_rows
 
 # Bump when preprocessing changes what it computes: part of every cache key.
 CACHE_VERSION = "1"
@@ -246,7 +249,7 @@ def _check_layouts(clips: list[Clip]) -> RowLayout:
 def resolve_data_dir(cfg: DataConfig) -> Path:
     if cfg.data_dir is not None:
         return Path(cfg.data_dir)
-    from motiongan_jax import synthetic
+    from motiongan_jax.data import synthetic
 
     return synthetic.default_dataset_dir(cfg.synthetic_seed)
 

@@ -20,7 +20,7 @@ from typing import Any, Sequence
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax.bvh import Motion
+from motiongan_jax.motion.bvh import Motion
 
 _AXES = "XYZ"
 

@@ -60,8 +60,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 from scipy.spatial.transform import Rotation
 
-from motiongan_jax.bvh import Motion, Skeleton
-from motiongan_jax.representation import CMU_UNIT_M
+from motiongan_jax.motion.bvh import Motion, Skeleton
+from motiongan_jax.motion.representation import CMU_UNIT_M
 
 # Bump whenever generation changes what it writes: it names the cache directory.
 VERSION = "1"
@@ -592,7 +592,7 @@ def foot_heights(world_FxJx3: np.ndarray, *, units_to_m: float = 1.0) -> np.ndar
 
 
 def _put_on_floor(motion: Motion, fps: float) -> Motion:
-    from motiongan_jax import kinematics
+    from motiongan_jax.motion import kinematics
 
     world = np.asarray(kinematics.world_positions(motion), dtype=np.float64)
     c = foot_heights(world).min(-1)  # file units
@@ -643,7 +643,7 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
     Atomic: everything is written into a temporary directory beside out_dir, which is then
     renamed. If out_dir exists: FileExistsError, unless overwrite (then it is replaced).
     Each clip is `seconds` of walking plus the T-pose frame 0. Same arguments -> same bytes."""
-    from motiongan_jax import bvh
+    from motiongan_jax.motion import bvh
 
     out = Path(out_dir)
     names = list(STYLES) if styles is None else list(styles)
@@ -683,7 +683,7 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
 def default_dataset_dir(seed: int = 0) -> Path:
     """$MOTIONGAN_CACHE (default ~/.cache/motiongan_jax)/synthetic-v{VERSION}-seed{seed}, generated
     with the default settings if missing. Safe when processes race: the loser uses the winner's."""
-    from motiongan_jax.data import cache_root  # not at the top: data imports this module
+    from motiongan_jax.data.dataset import cache_root  # not at the top: data imports this module
 
     out = cache_root() / f"synthetic-v{VERSION}-seed{int(seed)}"
     if (out / "styles.json").is_file():

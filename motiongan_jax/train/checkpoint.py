@@ -83,8 +83,8 @@ def _jsonable(x):
 def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
     """(state, meta, cfg, layout) of a training run's checkpoint, without its data. `params`:
     "ema" (default) puts G's moving average in `state.g_params` when the run keeps one
-    (train.g_ema_decay > 0), "raw" leaves the trained parameters (step.inference_state)."""
-    from motiongan_jax import step as step_lib
+    (train.g_ema_decay > 0), "raw" leaves the trained parameters (train.state.inference_state)."""
+    from motiongan_jax.train import state as train_state
 
     ckdir = Path(workdir) / "checkpoints"
     if not ckdir.is_dir():
@@ -93,18 +93,18 @@ def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
     step, meta = read_meta(mngr, step)
     cfg, layout, like = abstract_model(meta)
     state = restore(mngr, step, like)
-    return step_lib.inference_state(state, params), meta, cfg, layout
+    return train_state.inference_state(state, params), meta, cfg, layout
 
 
 def abstract_model(meta: dict):
     """(cfg, layout, abstract train state) that a checkpoint's (or an export's) meta describes:
     the state's shapes and dtypes (jax.ShapeDtypeStruct leaves) and its graph definitions."""
-    from motiongan_jax import step as step_lib
+    from motiongan_jax.train import state as train_state
     from motiongan_jax.config import from_dict
-    from motiongan_jax.representation import layout_from_parents
+    from motiongan_jax.motion.representation import layout_from_parents
 
     cfg = from_dict(meta["config"])
     layout = layout_from_parents(meta["joint_names"], meta["parents"], meta["bone_lengths_m"],
                                  meta.get("rest_offsets_m"))
-    like = jax.eval_shape(lambda: step_lib.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
+    like = jax.eval_shape(lambda: train_state.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
     return cfg, layout, like

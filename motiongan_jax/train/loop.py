@@ -24,7 +24,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax import atomic, checkpoint, curves, data, parallel, step as step_lib
+from motiongan_jax import atomic
+from motiongan_jax.train import checkpoint, parallel
+from motiongan_jax.data import curves, dataset as data
+from motiongan_jax.train import inference, state as train_state, step as step_lib_lib
 from motiongan_jax.config import Config, config_hash, to_dict
 
 
@@ -114,11 +117,12 @@ def preview_curve(T: int, spacing_m: float) -> np.ndarray:
 def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray, num: int = 3) -> Path:
     """A few styles (z = 0) walking the fixed preview curve, as a GIF: generate.py's own path
     (with G's moving average when the run keeps one)."""
-    from motiongan_jax import generate, viz
+    from motiongan_jax import viz
+    from motiongan_jax.generate import walk
 
-    state = step_lib.inference_state(state)
+    state = train_state.inference_state(state)
     labels = np.linspace(0, len(style_names) - 1, min(num, len(style_names))).round().astype(np.int32)
-    gen = generate.generate_motion(state, layout, curve_Tx3, step_lib.latent_w(state, jnp.asarray(labels)))
+    gen = walk.generate_motion(state, layout, curve_Tx3, inference.latent_w(state, jnp.asarray(labels)))
     return viz.animate_motions(list(gen.positions), layout.parents, [style_names[i] for i in labels], path,
                                curves=[curve_Tx3] * len(labels), joint_names=layout.joint_names)
 
@@ -131,11 +135,11 @@ def make_step_fn(cfg: Config, dataset, log=print):
     """The pure `train_step(state, batch, key)` for this dataset, with the gait targets of its
     training clips when the config's gait terms need them."""
     gait = None
-    if step_lib.needs_gait_targets(cfg.train):
+    if step_lib_lib.needs_gait_targets(cfg.train):
         gait = data.gait_targets(dataset.train, dataset.style_names, dataset.layout)
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
             + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))
-    return step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
+    return step_lib_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
 
 
 def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print) -> dict:
@@ -159,7 +163,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
 
     arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
     k_init, k_data, k_step = keys(cfg.train.seed)
-    state = step_lib.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
+    state = train_state.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
     step_fn = make_step_fn(cfg, dataset, log)
 
     def keyed_step(state, batch, key, s):  # the step's key, fold_in(k_step, s), made on the device

@@ -449,7 +449,7 @@ def curve_from_bvh(path_or_motion, units_to_m: float | None = None) -> np.ndarra
     """The floor path (metres) of a BVH file's root (the representation root: the pelvis), from
     its path or an already read `bvh.Motion`. Units default to a guess from the skeleton's leg
     length (CMU units, cm, inches or m)."""
-    from motiongan_jax import bvh, kinematics, representation
+    from motiongan_jax.motion import bvh, kinematics, representation
 
     motion = path_or_motion if isinstance(path_or_motion, bvh.Motion) else bvh.read_bvh(path_or_motion)
     units = representation.guess_units_to_m(motion.skeleton) if units_to_m is None else units_to_m

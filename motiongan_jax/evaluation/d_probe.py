@@ -1,0 +1,57 @@
+"""D's judgement of real windows and of altered copies (a statue, no steps, floating): whether D
+can tell a gait at all.
+"""
+
+from __future__ import annotations
+
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.special
+from scipy.ndimage import gaussian_filter1d
+
+from motiongan_jax.data import curves
+from motiongan_jax.train import inference
+
+
+PROBE_WINDOWS = 128  # real training windows the probe judges
+PROBE_SMOOTHING_SAMPLES = 2.0  # Gaussian sigma of the "no steps" window
+PROBE_FLOAT_M = 0.3  # how far the "floating" window's root rises over the window
+
+
+def discriminator_probe(state, batch: dict, key) -> dict:
+    """Can the trained D teach a gait? Its verdict on real training windows and on the same windows
+    turned into a statue gliding along the root (every frame the window's mean pose), smoothed along
+    time (no steps: Gaussian over PROBE_SMOOTHING_SAMPLES samples), floating (the root rising
+    PROBE_FLOAT_M over the window), and on G's output for their curves and labels (z and the gait
+    phase drawn as in training; G's parameters are the state's). Per input: the mean sigmoid of the real/fake logit, and the share
+    judged real (logit > 0). A D that judges a glide or a float as real as a walk gives G no
+    gradient toward planted feet or the floor."""
+    root, pose, labels = (np.asarray(batch[k]) for k in ("root_BxTx3", "pose_BxTxR", "label_B"))
+    B, T, _ = root.shape
+    vel = np.asarray(curves.velocity(jnp.asarray(root)))
+    floating = vel.copy()
+    floating[:, 1:, 1] += PROBE_FLOAT_M / (T - 1)
+    floating[:, 0, 1] = floating[:, 1, 1]
+    z = jax.random.normal(key, (B, inference.generator_z_dim(state)), jnp.float32)
+    g = inference.generator(state)
+    offset = (jax.random.uniform(jax.random.fold_in(key, 1), (B,), jnp.float32, 0.0, 2 * np.pi)
+              if inference.has_gait_phase(state) else None)
+    fake_vel, fake_pose = g(curves.velocity(jnp.asarray(batch["curve_BxTx3"])), g.style(jnp.asarray(labels), z), offset)
+    inputs = {
+        "real windows": (vel, pose),
+        "statue gliding along the root": (vel, np.broadcast_to(pose.mean(1, keepdims=True), pose.shape)),
+        f"pose smoothed along time (sigma {PROBE_SMOOTHING_SAMPLES:g} samples)":
+            (vel, gaussian_filter1d(pose, PROBE_SMOOTHING_SAMPLES, axis=1, mode="nearest")),
+        f"root rising {PROBE_FLOAT_M:g} m over the window": (floating, pose),
+        "G's output for the same curves and labels": (np.asarray(fake_vel), np.asarray(fake_pose)),
+    }
+    d = inference.discriminator(state)
+    out = {}
+    for name, (v, p) in inputs.items():
+        logit, _ = d(jnp.asarray(v, jnp.float32), jnp.asarray(p, jnp.float32), update_stats=False,
+                     labels_B=jnp.asarray(labels))
+        logit = np.asarray(logit, np.float64)
+        out[name] = {"p_real": float(np.mean(scipy.special.expit(logit))), "judged_real": float(np.mean(logit > 0))}
+    return out

@@ -1,0 +1,179 @@
+"""The evaluation report: its rows, markdown, JSON and the confusion plots, and its files.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from motiongan_jax import atomic
+from motiongan_jax.analysis import style_space
+from motiongan_jax.evaluation.protocol import Context
+from motiongan_jax.evaluation import clip_metrics
+
+
+ROWS = [
+    ("sra_top1", "style accuracy top-1 (evaluator)"),
+    ("sra_top3", "style accuracy top-3"),
+    ("fmd", "Fréchet motion distance (real: two halves of the held-out windows)"),
+    ("diversity", "diversity (feature distance)"),
+    ("multimodality", "multimodality (across z)"),
+    ("traj_error_original_m", "trajectory error, original (m)"),
+    ("traj_error_symmetric_m", "trajectory error, symmetric arc length (m)"),
+    ("endpoint_error_m", "end-point error (m)"),
+    ("path_length_ratio", "path length ratio"),
+    ("foot_skate_original_m", "foot skate, original (m per sample)"),
+    ("skate_ratio", "skating ratio (contacts faster than 0.5 m/s)"),
+    ("bone_length_error", "bone-length error (relative)"),
+    ("facing_error_deg", "facing vs travel direction (degrees)"),
+    ("ground_penetration", f"frames with a toe > {clip_metrics.PENETRATION_TOLERANCE_M * 100:.0f} cm below the floor"),
+    ("jerk_ratio", "jerk ratio (generated / real)"),
+    ("support", "support: frames with a toe within the contact height of the floor"),
+    ("lower_foot_height_m", "lower toe's mean height above the floor (m)"),
+    ("alternation", "alternation: −corr(left, right toe height)"),
+    ("step_frequency_hz", "step frequency (gait cycles/s; L−R toe height)"),
+    ("step_amplitude_m", "step amplitude (std of L−R toe height, m)"),
+    ("root_height_range_m", "root height range per clip (m)"),
+    ("long_support", "long curve: support"),
+    ("long_lower_foot_height_m", "long curve: lower toe's mean height (m)"),
+    ("long_alternation", "long curve: alternation"),
+    ("long_root_height_range_m", "long curve: root height range (m; real: the largest of a clip)"),
+    ("nearest_centroid_accuracy", "w nearest-centroid accuracy"),
+    ("pca_explained_1", "w PCA: variance explained by 1 component"),
+    ("pca_explained_2", "w PCA: variance explained by 2 components"),
+    ("interp_monotonicity", "interpolation monotonicity (Spearman)"),
+    ("arithmetic_agreement", "arithmetic A-B+C classified as A or C"),
+]
+
+
+def _fmt(x, digits=3) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    return f"{x:.{digits}g}" if abs(x) >= 1e-3 or x == 0 else f"{x:.2e}"
+
+
+def markdown(report: dict) -> str:
+    h = report["header"]
+    r = report["results"]
+    lines = [f"# Evaluation: {h['config_name']} (step {h['checkpoint_step']})", "",
+             f"- workdir: `{h['workdir']}`", f"- config hash: `{h['config_hash']}`",
+             f"- checkpoint step: {h['checkpoint_step']}, G's parameters: {h.get('g_params', 'raw')}",
+             f"- evaluator: `{h['evaluator']}`, checksum `{h['evaluator_checksum']}`",
+             f"- evaluator accuracy on real held-out windows: {_fmt((h.get('evaluator_real_heldout') or {}).get('top1'))} "
+             f"(chance {_fmt(1.0 / len(h['style_names']))})",
+             f"- seeds {h['settings']['seeds']}, K = {h['settings']['k']} noise draws per (curve, style), "
+             f"{r['num_generated_clips_per_seed']} generated clips per seed, {r['num_real_windows']} real held-out windows",
+             "- curves: " + ", ".join(f"{k} {v}" for k, v in h["curve_counts"].items()),
+             f"- files: training {len(h['train_files'])}, held-out {len(h['val_files'])} (lists in report.json)", "",
+             "## Metrics (generated: mean ± 95% CI over seeds; real held-out data)", "",
+             "| metric | generated | real |", "|---|---|---|"]
+    for key, label in ROWS:
+        g = r["generated"].get(key)
+        real = r["real"].get(key)
+        gs = "—" if g is None else f"{_fmt(g['mean'])} ± {_fmt(g['ci95'])}"
+        lines.append(f"| {label} | {gs} | {_fmt(real)} |")
+    kinds = sorted(k[len("traj_error_original_m["):-1] for k in r["generated"] if k.startswith("traj_error_original_m["))
+    if kinds:
+        lines += ["", "Trajectory error by curve kind (m, generated):", "",
+                  "| curve kind | original | symmetric |", "|---|---|---|"]
+        for kind in kinds:
+            a, b = r["generated"][f"traj_error_original_m[{kind}]"], r["generated"][f"traj_error_symmetric_m[{kind}]"]
+            lines.append(f"| {kind} | {_fmt(a['mean'])} ± {_fmt(a['ci95'])} | {_fmt(b['mean'])} ± {_fmt(b['ci95'])} |")
+    if r.get("search"):
+        s = r["search"]
+        lines += ["", f"Style search: the recovered w's nearest centroid is the clip's true style for "
+                      f"{_fmt(s['search_recovery'])} of {s['search_clips']} held-out clips (final loss {_fmt(s['search_final_loss'])})."]
+    lines += ["", "## Per style", "", "| style | SRA gen | SRA real | FMD gen | traj. orig. (m) | skate gen | skate real | bone err gen |",
+              "|---|---|---|---|---|---|---|---|"]
+    for name, v in r["per_style"].items():
+        g, re_ = v["generated"], v["real"]
+        lines.append(f"| {name} | {_fmt(g['sra_top1']['mean'])} | {_fmt(re_['sra_top1'])} | {_fmt(g['fmd']['mean'])} | "
+                     f"{_fmt(g['traj_error_original_m']['mean'])} | {_fmt(g['foot_skate_original_m']['mean'])} | "
+                     f"{_fmt(re_['foot_skate_original_m'])} | {_fmt(g['bone_length_error']['mean'])} |")
+    lines += ["", f"Gait per style (contact height {_fmt(r['contact_height_m'])} m, calibrated on the real training "
+                  "clips; step frequency in gait cycles/s, on the paths of held-out clips of the same style against "
+                  "those clips):", "",
+              "| style | support gen | support real | lower toe gen (m) | lower toe real (m) | alternation gen | "
+              "alternation real | step freq. gen | step freq. real | ratio |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, v in r["per_style"].items():
+        g, re_ = v["generated"], v["real"]
+        lines.append(f"| {name} | {_fmt(g['support']['mean'])} | {_fmt(re_['support'])} | "
+                     f"{_fmt(g['lower_foot_height_m']['mean'])} | {_fmt(re_['lower_foot_height_m'])} | "
+                     f"{_fmt(g['alternation']['mean'])} | {_fmt(re_['alternation'])} | "
+                     f"{_fmt(g['step_frequency_same_curve_hz']['mean'])} | {_fmt(re_['step_frequency_same_curve_hz'])} | "
+                     f"{_fmt(g['step_frequency_ratio']['mean'])} |")
+    if r.get("discriminator_probe"):
+        lines += ["", "The trained D's verdict (mean P(real), share judged real) on real training windows and "
+                      "on the same windows altered:", "", "| D's input | P(real) | judged real |", "|---|---|---|"]
+        for name, v in r["discriminator_probe"].items():
+            lines.append(f"| {name} | {_fmt(v['p_real'])} | {_fmt(v['judged_real'])} |")
+    lines += ["", "Plots: `confusion.png` (generated and real), `pca_w.png`.", ""]
+    return "\n".join(lines)
+
+
+def plot_confusion(conf_gen, conf_real, style_names, path) -> Path:
+    from motiongan_jax import viz
+
+    plt = viz._pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5.5))
+    for ax, conf, title in ((axes[0], conf_gen, "generated"), (axes[1], conf_real, "real held-out")):
+        m = np.asarray(conf, np.float64)
+        m = m / np.maximum(m.sum(1, keepdims=True), 1)
+        im = ax.imshow(m, vmin=0, vmax=1, cmap="Blues")
+        ax.set_xticks(range(len(style_names)), style_names, rotation=90, fontsize=7)
+        ax.set_yticks(range(len(style_names)), style_names, fontsize=7)
+        ax.set_xlabel("predicted")
+        ax.set_ylabel("requested" if title == "generated" else "true")
+        ax.set_title(f"evaluator confusion, {title}")
+    fig.colorbar(im, ax=axes, shrink=0.8)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def to_jsonable(x):
+    """Numpy values -> Python, non-finite floats -> None (strict JSON)."""
+    if isinstance(x, dict):
+        return {str(k): to_jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [to_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return to_jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def dumps(report: dict) -> str:
+    return json.dumps(to_jsonable(report), indent=1) + "\n"
+
+
+def write_report(out, report: dict, ctx: Context) -> str:
+    """Writes OUT/report.json, report.md, confusion.png and pca_w.png (OUT created); returns the
+    SHA-256 of report.json as written."""
+    from motiongan_jax import viz
+
+    out = Path(out)
+    results = report["results"]
+    out.mkdir(parents=True, exist_ok=True)
+    atomic.write_text(out / "report.json", dumps(report))
+    atomic.write_text(out / "report.md", markdown(to_jsonable(report)))
+    plot_confusion(results["confusion_generated"], results["confusion_real"], ctx.style_names,
+                   out / "confusion.png")
+    codes = style_space.label_codes(ctx.state, ctx.style_names, k=10)
+    X, y = codes.flat_samples
+    p = style_space.pca(X, 2)
+    viz.plot_style_pca(np.asarray(style_space.pca_transform(p, X)), np.asarray(y), ctx.style_names, out / "pca_w.png",
+                       centroids_Cx2=np.asarray(style_space.pca_transform(p, codes.centroids_CxD)),
+                       explained=np.asarray(p.explained_variance_ratio_K)[:2])
+    return hashlib.sha256((out / "report.json").read_bytes()).hexdigest()

@@ -1,0 +1,181 @@
+"""Writing generated motion: Outputs (by suffix; several motions -> .bvh/.npz get one file each, `name_<i>.ext`;
+.gif/.mp4/.png show them side by side). Every file is written atomically: on an error nothing
+(not even a partial file) is left at the output path.
+- .bvh: ik.positions_to_motion on the layout's skeleton (see ik.py for the twist rule), by
+  default in the training skeleton's own hierarchy (the bones leaving a joint with several
+  children are best fits; the error goes to `log`), or with hierarchy "exact" with zero-length
+  branch joints and every bone direction exact; bone lengths the skeleton's; metres by default
+  (Blender's BVH importer maps one file unit to one Blender unit = 1 m at its default scale
+  1.0, and converts Y-up to its Z-up with its default axes), or centimetres with units="cm"
+  (import those with scale 0.01).
+- .npz: positions (T, J, 3) float64 metres, Y up (the generated joints, after the floor shift);
+  positions_skeleton (T, J, 3): the same pose on the skeleton's bone lengths (= FK of the .bvh,
+  in the same hierarchy); joint_names, parents, fps (samples per second), style, w, z, curve
+  (T, 3), floor_shift_m.
+- .gif (Pillow) / .mp4 (ffmpeg or imageio-ffmpeg): a chase-camera animation (viz.animate_motions).
+- .png: stroboscopic strips (viz.pose_strips), the form of the paper's Figs. 4, 6 and 7.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from motiongan_jax import atomic
+from motiongan_jax.motion import ik
+from motiongan_jax.generate.limits import GenerateError
+from motiongan_jax.generate.walk import Generated
+from motiongan_jax.generate import limits
+
+
+OUTPUT_SUFFIXES = (".bvh", ".npz", ".gif", ".mp4", ".png")
+BVH_UNITS = {"m": 1.0, "cm": 100.0}
+
+
+def check_output_path(out, *, count: int = 1) -> list[Path]:
+    """The file(s) an output will be written to; GenerateError for an unsupported suffix, a
+    missing or unwritable directory, or a directory in the way. Nothing is created."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise GenerateError(f"output {out}: unsupported format {out.suffix or '(none)'!r}; use one of "
+                            f"{', '.join(OUTPUT_SUFFIXES)}")
+    parent = out.parent
+    if parent.exists() and not parent.is_dir():
+        raise GenerateError(f"cannot write {out}: {parent} is not a directory")
+    if not parent.is_dir():
+        raise GenerateError(f"cannot write {out}: directory {parent} does not exist")
+    try:  # a real probe: os.access says yes to root even where writing fails (/proc, read-only mounts)
+        fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{out.name}.", suffix=".probe")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise GenerateError(f"cannot write {out}: directory {parent} is not writable "
+                            f"({e.strerror})") from None
+    paths = [out] if count == 1 or suffix in (".gif", ".mp4", ".png") else \
+        [out.with_name(f"{out.stem}_{i}{out.suffix}") for i in range(count)]
+    for p in paths:
+        if p.is_dir():
+            raise GenerateError(f"cannot write {p}: it is a directory")
+        if p.exists() and not os.access(p, os.W_OK):
+            raise GenerateError(f"cannot write {p}: the existing file is read-only")
+    if suffix == ".mp4":
+        from motiongan_jax import viz
+
+        try:
+            viz.video_writer(out, 15.0)
+        except RuntimeError as e:
+            raise GenerateError(str(e)) from None
+    return paths
+
+
+def check_output_size(out, frames: int, count: int = 1) -> None:
+    """GenerateError when a .gif of `count` panels x `frames` frames exceeds MAX_GIF_FRAMES
+    (Pillow keeps every frame in memory until the file is written; .mp4 streams to ffmpeg)."""
+    if Path(out).suffix.lower() == ".gif" and frames * count > limits.MAX_GIF_FRAMES:
+        raise GenerateError(f"output {out}: a GIF of {count} panel(s) x {frames:,} frames is more than "
+                            f"the limit of {limits.MAX_GIF_FRAMES:,} frames x panels (generate.limits.MAX_GIF_FRAMES; "
+                            f"GIF frames are held in memory): write .mp4, .bvh or .npz, or a shorter curve")
+
+
+def rest_offsets(layout) -> np.ndarray:
+    """The export skeleton's rest offsets: the layout's (every checkpoint stores them)."""
+    if layout.rest_offsets_m is None:
+        raise GenerateError("this layout has no rest offsets: a BVH export needs the skeleton's rest pose")
+    return np.asarray(layout.rest_offsets_m, np.float64)
+
+
+def to_bvh_motion(positions_TxJx3, layout, fps: float, units: str = "m", log=None,
+                  hierarchy: str = "source"):
+    """(bvh.Motion, ExportSkeleton) of one generated clip on the `hierarchy` of ik.HIERARCHIES
+    (see ik.py). For "source", `log` gets how far the best-fit bones are off the generated
+    directions."""
+    if units not in BVH_UNITS:
+        raise GenerateError(f"BVH units must be one of {', '.join(BVH_UNITS)}, got {units!r}")
+    if hierarchy not in ik.HIERARCHIES:
+        raise GenerateError(f"BVH hierarchy must be one of {', '.join(ik.HIERARCHIES)}, got {hierarchy!r}")
+    rest = rest_offsets(layout)
+    scale = BVH_UNITS[units]
+    motion = ik.positions_to_motion(positions_TxJx3, layout.joint_names, layout.parents, rest,
+                                    1.0 / fps, units_per_m=scale, hierarchy=hierarchy)
+    ex = ik.export_skeleton(layout.joint_names, layout.parents, rest, scale, hierarchy)
+    if log is not None and hierarchy == "source":
+        err = ik.bone_errors(positions_TxJx3, ik.layout_positions(motion, ex), layout.parents)
+        kids = np.bincount(np.asarray(layout.parents[1:]), minlength=layout.num_joints)
+        fitted = [b for b in range(layout.num_joints - 1)
+                  if kids[layout.parents[b + 1]] > 1 and ex.helper_index[b + 1] < 0]
+        if fitted:
+            names = sorted({layout.joint_names[layout.parents[b + 1]] for b in fitted})
+            deg = np.degrees(err[:, fitted])
+            # how far the joint at the bone's end moves: a chord of the bone's length
+            cm = 200 * np.asarray(layout.bone_lengths_m)[fitted] * np.sin(err[:, fitted] / 2)
+            log(f"BVH, source hierarchy: the {len(fitted)} bones leaving {', '.join(names)} are best fits, "
+                f"{deg.mean():.2g} deg mean and {deg.max():.2g} deg max off the generated directions "
+                f"({cm.mean():.2g} cm mean, {cm.max():.2g} cm max at the joints they lead to; every other bone "
+                f"direction exact); --bvh-hierarchy exact makes them exact with a zero-length joint per bone")
+    return motion, ex
+
+
+def save_bvh(path, positions_TxJx3, layout, fps: float, units: str = "m", log=None,
+             hierarchy: str = "source") -> Path:
+    from motiongan_jax.motion import bvh
+
+    motion, _ = to_bvh_motion(positions_TxJx3, layout, fps, units, log, hierarchy)
+    bvh.write_bvh(path, motion, precision=6 if units == "cm" else 7)
+    return Path(path)
+
+
+def save_npz(path, gen: Generated, index: int, layout, fps: float, style: str, z=None,
+             log=None, hierarchy: str = "source") -> Path:
+    pos = gen.positions[index]
+    motion, ex = to_bvh_motion(pos, layout, fps, "m", log, hierarchy)
+    skel = ik.layout_positions(motion, ex)
+    arrays = dict(positions=pos, positions_skeleton=skel,
+                  joint_names=np.array(layout.joint_names), parents=np.array(layout.parents, np.int32),
+                  fps=np.float64(fps), style=np.array(style), w=gen.w[index],
+                  curve=gen.curve, floor_shift_m=np.float64(gen.floor_shift_m[index]))
+    if z is not None:
+        arrays["z"] = np.asarray(z, np.float32)
+    path = Path(path)
+    with atomic.atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+    return path
+
+
+def write_outputs(out, gen: Generated, titles: Sequence[str], layout, fps: float, *,
+                  bvh_units: str = "m", bvh_hierarchy: str = "source", z_per_motion=None,
+                  log: Callable[[str], None] | None = None) -> list[Path]:
+    """Writes every motion of `gen` to `out` by its suffix (module doc); returns the paths.
+    `bvh_hierarchy` (ik.HIERARCHIES) is the skeleton of .bvh files and of .npz's
+    positions_skeleton."""
+    from motiongan_jax import viz
+
+    out = Path(out)
+    B = gen.positions.shape[0]
+    paths = check_output_path(out, count=B)
+    check_output_size(out, gen.positions.shape[1], B)
+    suffix = out.suffix.lower()
+    parents = list(layout.parents)
+    try:
+        if suffix == ".bvh":
+            for i, p in enumerate(paths):
+                save_bvh(p, gen.positions[i], layout, fps, bvh_units, log, bvh_hierarchy)
+        elif suffix == ".npz":
+            for i, p in enumerate(paths):
+                save_npz(p, gen, i, layout, fps, titles[i],
+                         None if z_per_motion is None else z_per_motion[i], log, bvh_hierarchy)
+        elif suffix in (".gif", ".mp4"):
+            viz.animate_motions(list(gen.positions), parents, list(titles), out, fps=fps,
+                                curves=[gen.curve] * B, joint_names=layout.joint_names)
+        else:
+            viz.pose_strips(list(gen.positions), parents, list(titles), out, curves=[gen.curve] * B)
+    except RuntimeError as e:  # e.g. ffmpeg vanished between the check and the write
+        raise GenerateError(str(e)) from None
+    except OSError as e:  # the temporary file is gone with the error (atomic writes)
+        raise GenerateError(f"cannot write {out}: {e.strerror or e}") from None
+    return paths
