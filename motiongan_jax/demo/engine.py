@@ -200,7 +200,7 @@ class Engine:
         return styles_lib.parse_style(text, self.style_names, seed)
 
     def shape(self, name, length=None, scale=2.0) -> np.ndarray:
-        """A built-in shape's floor points (generate.load_curve), at most a few hundred."""
+        """A built-in shape's floor points (generate.user_curves.load_curve), at most a few hundred."""
         if not isinstance(name, str) or name not in curves.SHAPES:
             raise RequestError(f"unknown shape {name!r}; valid shapes: {', '.join(curves.SHAPES)}"[:200])
         length = None if length is None else _number(length, "'length'")
@@ -246,7 +246,7 @@ class Engine:
         return Result(cut, titles, zs, tuple(notes), Tb, Bb)
 
     def _spec_codes(self, specs, z) -> np.ndarray:
-        """generate.spec_codes, remembered for the last STYLE_CACHE (styles, z): moving the
+        """generate.styles.spec_codes, remembered for the last STYLE_CACHE (styles, z): moving the
         speed or redrawing the path reuses them."""
         key = (tuple((s.kind, s.terms) for s in specs), z.tobytes())
         with self._codes_lock:
@@ -281,7 +281,7 @@ class Engine:
 
     def export(self, body) -> tuple[bytes, str, str]:
         """(file bytes, file name, MIME type) of /api/export: the motion `index` as .bvh/.npz, or
-        every motion side by side as .gif, written by generate.write_outputs."""
+        every motion side by side as .gif, written by generate.writers.write_outputs."""
         if not isinstance(body, dict):
             raise RequestError("the request body must be a JSON object")
         fmt = body.get("format")

@@ -1,7 +1,7 @@
 """Inference exports: a trained G in one small file, and the model shipped with the package.
 
 An export is an .npz holding what generation and analysis need and nothing else:
-- `g/<path>`: G's parameters (the moving average by default, see step.inference_state),
+- `g/<path>`: G's parameters (the moving average by default, see train.state.inference_state),
   Latent Transform included, float32, one entry per leaf of `state.g_params`;
 - `meta`: the checkpoint's meta as JSON (config, style names, skeleton layout, fps), without the
   machine-specific data directory;
