@@ -30,7 +30,7 @@ import jax
 from bench.bench_data import long_clips
 from bench.timing import load, median_time
 from motiongan_jax.data import dataset as data
-from motiongan_jax.train import state as train_state, step as step_lib_lib
+from motiongan_jax.train import state as train_state, step as step_lib
 from motiongan_jax.config import load_config, override
 from motiongan_jax.train.loop import make_step_fn
 
@@ -50,7 +50,7 @@ def setup(which: str):
                         "data.window_stride=3"])
         clips, styles = long_clips()
         layout = clips[0].layout
-        step_fn = step_lib_lib.make_train_step(cfg, layout, len(styles))
+        step_fn = step_lib.make_train_step(cfg, layout, len(styles))
     return cfg, data.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles), step_fn
 
 

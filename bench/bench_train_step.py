@@ -29,7 +29,7 @@ import jax.numpy as jnp
 
 from bench.timing import load
 from motiongan_jax.data import dataset as data, synthetic
-from motiongan_jax.train import state as train_state, step as step_lib_lib
+from motiongan_jax.train import state as train_state, step as step_lib
 from motiongan_jax.config import load_config, override
 from motiongan_jax.motion.representation import CMU_UNIT_M, layout_from_skeleton
 
@@ -50,14 +50,14 @@ def paper_or_small(which: str):
 def stand_in_gait(cfg, layout, num_styles):
     """Gait targets of the right kind for configs with gait terms (their values do not change
     the step's cost), else None."""
-    if not step_lib_lib.needs_gait_targets(cfg.train):
+    if not step_lib.needs_gait_targets(cfg.train):
         return None
     return data.GaitTargets((1.2,) * num_styles, 0.02, data.foot_joints(layout))
 
 
 def bench_step_fn(cfg, layout, num_styles):
     """The pure train step of `cfg` on fake data (fake_batch)."""
-    return step_lib_lib.make_train_step(cfg, layout, num_styles, stand_in_gait(cfg, layout, num_styles))
+    return step_lib.make_train_step(cfg, layout, num_styles, stand_in_gait(cfg, layout, num_styles))
 
 
 def fake_batch(B, T, R, num_styles, key):

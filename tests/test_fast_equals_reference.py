@@ -28,7 +28,7 @@ import pytest
 from flax import nnx
 
 from conftest import FAST, compiled_call
-from motiongan_jax.train import state as train_state, step as step_lib_lib
+from motiongan_jax.train import state as train_state, step as step_lib
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 from motiongan_jax.nn import Discriminator, Generator, conv, layers
 
@@ -275,7 +275,7 @@ def _one_step(impl: str, dtype: str):
 
     batch, key = _curvy_batch(2, STEP_T, LAYOUT.num_rows, jax.random.key(42)), jax.random.key(7)
     state = train_state.init_state(STEP_CFG, LAYOUT, C, jax.random.key(0), impl=impl, dtype=dtype)
-    step = jax.jit(step_lib_lib.make_train_step(STEP_CFG, LAYOUT, C)).lower(state, batch, key).compile(
+    step = jax.jit(step_lib.make_train_step(STEP_CFG, LAYOUT, C)).lower(state, batch, key).compile(
         compiler_options=FAST)
     return step(state, batch, key)
 
@@ -350,5 +350,5 @@ def test_step_runs_g_once_and_d_three_times(monkeypatch):
     monkeypatch.setattr(Generator, "__call__", counting_g)
     monkeypatch.setattr(Discriminator, "__call__", counting_d)
     state = jax.eval_shape(lambda: train_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
-    jax.eval_shape(step_lib_lib.make_train_step(CFG, LAYOUT, C), state, _batch(), jax.random.key(1))
+    jax.eval_shape(step_lib.make_train_step(CFG, LAYOUT, C), state, _batch(), jax.random.key(1))
     assert calls == {"G": 1, "D": 3}

@@ -13,7 +13,7 @@ import pytest
 from flax import nnx
 
 from conftest import FAST
-from motiongan_jax.train import inference, objectives, state as train_state, step as step_lib_lib
+from motiongan_jax.train import inference, objectives, state as train_state, step as step_lib
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 
@@ -55,7 +55,7 @@ def setup():
     state0 = train_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
     batch = _batch()
     key = jax.random.key(7)
-    step = jax.jit(step_lib_lib.make_train_step(CFG, LAYOUT, C)).lower(state0, batch, key).compile(
+    step = jax.jit(step_lib.make_train_step(CFG, LAYOUT, C)).lower(state0, batch, key).compile(
         compiler_options=FAST)
 
     def run(state, base_key, n=3):
@@ -323,7 +323,7 @@ def test_projection_d_judges_each_window_as_its_label():
     assert fake_term(CFG.model, [2, 3]) == fake_term(CFG.model, [0, 1])
     # and the whole step trains with it
     state = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    train_step = jax.jit(step_lib_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, jax.random.key(7)).compile(
+    train_step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, jax.random.key(7)).compile(
         compiler_options=FAST)
     state, metrics = train_step(state, batch, jax.random.key(7))
     assert all(np.isfinite(float(v)) for v in metrics.values())
@@ -458,11 +458,11 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
     assert _leaves_equal(objectives.sample_labels_and_z(cfg, C, B, jax.random.key(5)),
                          objectives.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
     with pytest.raises(ValueError, match="need gait targets"):
-        step_lib_lib.make_train_step(cfg, LAYOUT, C)
+        step_lib.make_train_step(cfg, LAYOUT, C)
     with pytest.raises(ValueError, match="3 stride lengths for 4 styles"):
-        step_lib_lib.make_train_step(cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
+        step_lib.make_train_step(cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
     state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    step = jax.jit(step_lib_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, _batch(), jax.random.key(1)).compile(
+    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, _batch(), jax.random.key(1)).compile(
         compiler_options=FAST)
     state, m = step(state0, _batch(), jax.random.key(1))
     chex.assert_tree_all_finite(m)
@@ -508,7 +508,7 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
         g_params = jax.tree.map(lambda x: x, state0.g_params)
         g_params["latent"] = jax.tree.map(lambda x: 10.0 * x, g_params["latent"])
         state0 = state0.replace(g_params=g_params)
-        _, m = jax.jit(step_lib_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, key).compile(
+        _, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, key).compile(
             compiler_options=FAST)(state0, batch, key)
         labels, z = objectives.sample_labels_and_z(cfg, C, B, key)
         labels = labels.at[0].set(batch["label_B"][0])
@@ -539,7 +539,7 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
     assert _leaves_equal(state0.g_ema_params, state0.g_params)
 
     def compiled(c, s):
-        return jax.jit(step_lib_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
+        return jax.jit(step_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
             compiler_options=FAST)
 
     # (that the average never feeds back, training being that of a run without it, is checked bit
@@ -565,4 +565,4 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
         train_state.inference_state(state, "average")
     # a state and a step that disagree about the average are refused at trace time
     with pytest.raises(ValueError, match="g_ema_decay"):
-        jax.eval_shape(step_lib_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))
+        jax.eval_shape(step_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))

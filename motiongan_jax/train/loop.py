@@ -27,7 +27,7 @@ import numpy as np
 from motiongan_jax import atomic
 from motiongan_jax.train import checkpoint, parallel
 from motiongan_jax.data import curves, dataset as data
-from motiongan_jax.train import inference, state as train_state, step as step_lib_lib
+from motiongan_jax.train import inference, state as train_state, step as step_lib
 from motiongan_jax.config import Config, config_hash, to_dict
 
 
@@ -135,11 +135,11 @@ def make_step_fn(cfg: Config, dataset, log=print):
     """The pure `train_step(state, batch, key)` for this dataset, with the gait targets of its
     training clips when the config's gait terms need them."""
     gait = None
-    if step_lib_lib.needs_gait_targets(cfg.train):
+    if step_lib.needs_gait_targets(cfg.train):
         gait = data.gait_targets(dataset.train, dataset.style_names, dataset.layout)
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
             + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))
-    return step_lib_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
+    return step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
 
 
 def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print) -> dict:
