@@ -20,10 +20,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from motiongan_jax.data import dataset as data, synthetic
-from motiongan_jax.motion import kinematics
 from motiongan_jax.config import DataConfig
-from motiongan_jax.motion.representation import CMU_UNIT_M, layout_from_skeleton, to_rows
+from motiongan_jax.data import dataset as data
+from motiongan_jax.data import synthetic
+from motiongan_jax.motion import kinematics
+from motiongan_jax.motion.representation import (
+    CMU_UNIT_M,
+    layout_from_skeleton,
+    to_rows,
+)
 
 SHARED = Path(os.environ.get("MOTIONGAN_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 

@@ -26,7 +26,8 @@ from bench.bench_train_step import paper_or_small
 from bench.timing import load
 from motiongan_jax.data import curves
 from motiongan_jax.generate import walk as walk_lib
-from motiongan_jax.train import inference, state as train_state
+from motiongan_jax.train import inference
+from motiongan_jax.train import state as train_state
 
 REFERENCE_S = {128: 0.084, 1024: 0.62}
 GOAL_S = {128: 0.030, 1024: 0.2}

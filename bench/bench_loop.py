@@ -29,9 +29,10 @@ import jax
 
 from bench.bench_data import long_clips
 from bench.timing import load, median_time
-from motiongan_jax.data import dataset as data
-from motiongan_jax.train import state as train_state, step as step_lib
 from motiongan_jax.config import load_config, override
+from motiongan_jax.data import dataset as data
+from motiongan_jax.train import state as train_state
+from motiongan_jax.train import step as step_lib
 from motiongan_jax.train.loop import make_step_fn
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"

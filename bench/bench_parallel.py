@@ -34,11 +34,11 @@ def child(args) -> None:
     if args.num_processes > 1:
         jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
     from bench.timing import load
+    from motiongan_jax.config import load_config, override
     from motiongan_jax.data import dataset as data
     from motiongan_jax.train import parallel
     from motiongan_jax.train import state as train_state
     from motiongan_jax.train.loop import make_step_fn
-    from motiongan_jax.config import load_config, override
 
     cfg = override(load_config(ROOT / "configs" / f"{args.which}.py"), args.set)
     dataset = data.load_dataset(cfg.data, log=lambda s: None)

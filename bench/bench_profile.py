@@ -33,13 +33,19 @@ import jax.numpy as jnp
 import optax
 from flax import nnx
 
-from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small, stand_in_gait
+from bench.bench_train_step import (
+    bench_step_fn,
+    fake_batch,
+    paper_or_small,
+    stand_in_gait,
+)
 from bench.timing import load, median_time
 from motiongan_jax.data import curves
-from motiongan_jax.train import objectives, state as train_state
+from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.nn.generator import Generator
-from motiongan_jax.motion.representation import LENGTH_UNIT_M
+from motiongan_jax.train import objectives
+from motiongan_jax.train import state as train_state
 
 SCOPES = Generator.BLOCKS + ("heads", "D")
 

@@ -28,10 +28,12 @@ import jax
 import jax.numpy as jnp
 
 from bench.timing import load
-from motiongan_jax.data import dataset as data, synthetic
-from motiongan_jax.train import state as train_state, step as step_lib
 from motiongan_jax.config import load_config, override
+from motiongan_jax.data import dataset as data
+from motiongan_jax.data import synthetic
 from motiongan_jax.motion.representation import CMU_UNIT_M, layout_from_skeleton
+from motiongan_jax.train import state as train_state
+from motiongan_jax.train import step as step_lib
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 REFERENCE_STEP_S = 8.57

@@ -383,7 +383,9 @@ def paper() -> Config:
     """Exactly the paper: CMU styled walks (subjects 137 and 142), 28 styles, B 24, T 128, 200k
     steps. The CMU trials are not shipped (pass --data DIR, files named like 137_04.bvh); far too
     slow for a CPU (~8.6 s per step on 2 cores): run it on a GPU."""
-    from motiongan_jax.data.dataset import PAPER_STYLES  # data imports jax: only when this preset is asked for
+    from motiongan_jax.data.dataset import (
+        PAPER_STYLES,  # data imports jax: only when this preset is asked for
+    )
 
     return Config(
         name="paper",

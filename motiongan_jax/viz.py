@@ -103,7 +103,8 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
         ax = fig.add_subplot(1, n, i + 1, projection="3d")
         ax.set_title(titles[i], fontsize=9)
         ax.set_zlim(0, view)
-        ax.set_xticklabels([]); ax.set_yticklabels([]); ax.set_zticklabels([])
+        for set_labels in (ax.set_xticklabels, ax.set_yticklabels, ax.set_zticklabels):
+            set_labels([])
         ax.view_init(elev=15, azim=-60)
         curve = None if curves is None or curves[i] is None else np.asarray(curves[i], np.float64)
         red = ax.plot([], [], [], color="red", lw=1)[0]
@@ -184,7 +185,8 @@ def pose_strips(joints_list, parents, titles, path, *, curves=None, num_poses: i
         ax.set_zlim(lo[1], lo[1] + span[1])
         ax.set_box_aspect((span[0], span[2], span[1]))
         ax.view_init(elev=25, azim=-70)
-        ax.set_xticklabels([]); ax.set_yticklabels([]); ax.set_zticklabels([])
+        for set_labels in (ax.set_xticklabels, ax.set_yticklabels, ax.set_zticklabels):
+            set_labels([])
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
         with atomic.atomic_path(path) as tmp:
@@ -241,7 +243,8 @@ def plot_style_pca(points_Nx2, labels_N, style_names, path, *, centroids_Cx2=Non
         ax.set_xlabel(f"PC1 ({100 * float(explained[0]):.1f}% of variance)")
         ax.set_ylabel(f"PC2 ({100 * float(explained[1]):.1f}% of variance)" if len(explained) > 1 else "PC2")
     else:
-        ax.set_xlabel("PC1"); ax.set_ylabel("PC2")
+        ax.set_xlabel("PC1")
+        ax.set_ylabel("PC2")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, loc="best", markerscale=1.2, ncol=2 if C > 12 else 1)
     ax.grid(alpha=0.3)

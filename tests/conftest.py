@@ -87,11 +87,11 @@ def random_run(cfg, wd, step: int = 4, seed: int = 0, data_dir: str = "<test>"):
     import jax
     import numpy as np
 
-    from motiongan_jax.train import checkpoint
-    from motiongan_jax.motion import representation
     from motiongan_jax.data import synthetic
-    from motiongan_jax.train import state as train_state
+    from motiongan_jax.motion import representation
+    from motiongan_jax.train import checkpoint
     from motiongan_jax.train import loop as train_lib
+    from motiongan_jax.train import state as train_state
 
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     styles = tuple(sorted(synthetic.STYLES))

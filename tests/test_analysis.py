@@ -8,19 +8,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
 from conftest import load_cli
+
 from motiongan_jax.analysis import (
     adain as adain_lib,
+)
+from motiongan_jax.analysis import (
     clips,
-    probe as probe_lib,
-    search as search_lib,
     style_space,
 )
+from motiongan_jax.analysis import (
+    probe as probe_lib,
+)
+from motiongan_jax.analysis import (
+    search as search_lib,
+)
+from motiongan_jax.data import curves, synthetic
+from motiongan_jax.generate import styles as styles_lib
+from motiongan_jax.generate import walk
 from motiongan_jax.motion import bvh, kinematics, representation
 from motiongan_jax.train import checkpoint, inference
-from motiongan_jax.data import curves, synthetic
-from motiongan_jax.generate import styles as styles_lib, walk
 
 
 @pytest.fixture(scope="module")

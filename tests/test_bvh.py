@@ -8,10 +8,9 @@ import re
 
 import numpy as np
 import pytest
-
 from expected import CMU_NAMES
+
 from motiongan_jax.motion import bvh
-from motiongan_jax.motion.bvh import BVHError, parse_bvh, read_bvh, read_bvh_dir, write_bvh
 
 # A small hand-written file: mixed channel orders, 3- and 6-channel joints, position channels
 # after rotations, exponent notation, two End Sites. 6 + 3 + 6 + 3 = 18 channels.
@@ -78,7 +77,7 @@ def assert_same_motion(a: bvh.Motion, b: bvh.Motion, atol: float) -> None:
 # ---------------------------------------------------------------------------------------------
 
 def test_small_file_parses():
-    m = parse_bvh(SMALL, source="small.bvh")
+    m = bvh.parse_bvh(SMALL, source="small.bvh")
     sk = m.skeleton
     assert sk.names == ("pelvis", "spine", "spine_EndSite", "leg", "foot", "foot_EndSite")
     assert sk.parents == (-1, 0, 1, 0, 3, 4)
@@ -113,12 +112,12 @@ def test_layout_variants_parse_the_same(variant):
         text = "\n".join(lines) + "\n\n  \n"
     else:
         text = SMALL.replace("ROOT pelvis\n{", "ROOT pelvis {").replace("End Site\n\t\t{", "End Site {")
-    assert_same_motion(parse_bvh(text), parse_bvh(SMALL), atol=0)
+    assert_same_motion(bvh.parse_bvh(text), bvh.parse_bvh(SMALL), atol=0)
 
 
 def test_no_trailing_newline_and_lowercase_channels():
     text = SMALL.rstrip("\n").replace("Xrotation Zrotation Yrotation", "xrotation ZROTATION Yrotation")
-    m = parse_bvh(text)
+    m = bvh.parse_bvh(text)
     assert m.skeleton.channels[4] == ("Xrotation", "Zrotation", "Yrotation")  # canonical spelling
     np.testing.assert_array_equal(m.values, SMALL_FRAMES)
 
@@ -128,7 +127,7 @@ def test_three_channel_root_and_any_channel_subset():
     lines[4] = "\tCHANNELS 3 Zrotation Xrotation Yrotation"  # root without position channels
     lines[17] = "\t\tCHANNELS 2 Yposition Xrotation"
     frames = ["10 20 30 1 2 3 5 7 0.1 0.2 0.3"] * 3
-    m = parse_bvh("\n".join(lines[:32] + frames))
+    m = bvh.parse_bvh("\n".join(lines[:32] + frames))
     assert m.skeleton.channels[0] == ("Zrotation", "Xrotation", "Yrotation")
     assert m.skeleton.channels[3] == ("Yposition", "Xrotation")
     assert m.values.shape == (3, 11)
@@ -137,7 +136,7 @@ def test_three_channel_root_and_any_channel_subset():
 def test_two_end_sites_under_one_joint_get_distinct_names():
     lines = list(SMALL_LINES)
     lines[13:13] = ["\t\tEnd Site", "\t\t{", "\t\t\tOFFSET 1 0 0", "\t\t}"]
-    m = parse_bvh("\n".join(lines))
+    m = bvh.parse_bvh("\n".join(lines))
     assert m.skeleton.names[:4] == ("pelvis", "spine", "spine_EndSite", "spine_EndSite2")
     assert m.skeleton.parents[:4] == (-1, 0, 1, 1)
 
@@ -170,7 +169,7 @@ BANDAI_FILES = (
 
 @pytest.fixture(scope="module")
 def cmu_standard(shared_data):
-    return read_bvh(shared_data / "cmu" / "CMU_standard.bvh")
+    return bvh.read_bvh(shared_data / "cmu" / "CMU_standard.bvh")
 
 
 def test_cmu_standard(cmu_standard, shared_data):
@@ -193,7 +192,7 @@ def test_cmu_standard(cmu_standard, shared_data):
 
 
 def test_cmu_131_01(cmu_standard, shared_data):
-    m = read_bvh(shared_data / "cmu" / "131_01.bvh")
+    m = bvh.read_bvh(shared_data / "cmu" / "131_01.bvh")
     assert m.skeleton.num_joints == 38 and m.skeleton.num_channels == 96
     assert m.values.shape == (994, 96)
     assert m.fps == pytest.approx(120, rel=1e-4)
@@ -204,7 +203,7 @@ def test_cmu_131_01(cmu_standard, shared_data):
 
 @pytest.mark.parametrize("rel", BANDAI_FILES)
 def test_bandai_files(shared_data, rel):
-    m = read_bvh(shared_data / rel)
+    m = bvh.read_bvh(shared_data / rel)
     sk = m.skeleton
     assert sk.num_joints == 22 + 5  # 5 End Sites: Head, both Hands, both Toes
     real = [j for j in range(sk.num_joints) if not sk.is_end_site[j]]
@@ -223,32 +222,32 @@ def test_bandai_files(shared_data, rel):
 # ---------------------------------------------------------------------------------------------
 
 def test_round_trip_small(tmp_path):
-    m = parse_bvh(SMALL)
+    m = bvh.parse_bvh(SMALL)
     path = tmp_path / "small.bvh"
-    write_bvh(path, m)
-    back = read_bvh(path)
+    bvh.write_bvh(path, m)
+    back = bvh.read_bvh(path)
     assert_same_motion(back, m, atol=5e-7)
     assert back.frame_time == m.frame_time  # written exactly
     # Writing what was read gives the same text again.
-    write_bvh(tmp_path / "again.bvh", back)
+    bvh.write_bvh(tmp_path / "again.bvh", back)
     assert (tmp_path / "again.bvh").read_text() == path.read_text()
 
 
 def test_round_trip_precision(tmp_path):
-    m = parse_bvh(SMALL)
+    m = bvh.parse_bvh(SMALL)
     m = dataclasses.replace(m, values=m.values + 1.23456789e-3)
-    write_bvh(tmp_path / "p2.bvh", m, precision=2)
-    back = read_bvh(tmp_path / "p2.bvh")
+    bvh.write_bvh(tmp_path / "p2.bvh", m, precision=2)
+    back = bvh.read_bvh(tmp_path / "p2.bvh")
     np.testing.assert_allclose(back.values, m.values, rtol=0, atol=0.005 + 1e-12)
     assert not np.array_equal(back.values, m.values)
 
 
 @pytest.mark.parametrize("rel", ("cmu/CMU_standard.bvh", "cmu/131_01.bvh") + BANDAI_FILES[:2])
 def test_round_trip_real(shared_data, tmp_path, rel):
-    m = read_bvh(shared_data / rel)
+    m = bvh.read_bvh(shared_data / rel)
     out = tmp_path / "out.bvh"
-    write_bvh(out, m)
-    assert_same_motion(read_bvh(out), m, atol=5e-7 * (1 + 1e-9))
+    bvh.write_bvh(out, m)
+    assert_same_motion(bvh.read_bvh(out), m, atol=5e-7 * (1 + 1e-9))
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left behind
 
 
@@ -256,9 +255,9 @@ def test_round_trip_real(shared_data, tmp_path, rel):
 # Malformed files: one test per problem, each checking file, line and problem in the message
 # ---------------------------------------------------------------------------------------------
 
-def expect_error(text: str, line: int, *fragments: str) -> BVHError:
-    with pytest.raises(BVHError) as info:
-        parse_bvh(text, source="bad.bvh")
+def expect_error(text: str, line: int, *fragments: str) -> bvh.BVHError:
+    with pytest.raises(bvh.BVHError) as info:
+        bvh.parse_bvh(text, source="bad.bvh")
     msg = str(info.value)
     m = re.match(r"^(.*):(\d+): (.+)$", msg, flags=re.S)
     assert m, msg
@@ -284,7 +283,7 @@ def edited(replace: dict[int, str | None] | None = None, insert: dict[int, str] 
 
 
 def test_error_is_a_value_error():
-    assert issubclass(BVHError, ValueError)
+    assert issubclass(bvh.BVHError, ValueError)
 
 
 def test_missing_closing_brace():
@@ -447,8 +446,8 @@ def test_empty_text():
 def test_read_bvh_names_the_file(tmp_path):
     path = tmp_path / "broken.bvh"
     path.write_text(edited(replace={34: "1 2 3"}))
-    with pytest.raises(BVHError, match=rf"^{re.escape(str(path))}:34: wrong number of values"):
-        read_bvh(path)
+    with pytest.raises(bvh.BVHError, match=rf"^{re.escape(str(path))}:34: wrong number of values"):
+        bvh.read_bvh(path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -473,29 +472,29 @@ def make_tree(root):
 
 def test_read_bvh_dir_stops_at_first_bad_file(tmp_path):
     make_tree(tmp_path)
-    with pytest.raises(BVHError) as info:
-        read_bvh_dir(tmp_path)
+    with pytest.raises(bvh.BVHError) as info:
+        bvh.read_bvh_dir(tmp_path)
     assert str(info.value).startswith(f"{tmp_path / 'b' / 'bad_count.bvh'}:31: fewer frames")
 
 
 def test_read_bvh_dir_skip_bad(tmp_path):
     make_tree(tmp_path)
-    motions, errors = read_bvh_dir(tmp_path, skip_bad=True)
+    motions, errors = bvh.read_bvh_dir(tmp_path, skip_bad=True)
     # Sorted by relative path: a/good1, b/bad_count, b/c/good2, b/d_bad_channel, z.
     assert [m.source for m in motions] == [str(tmp_path / p) for p in ("a/good1.bvh", "b/c/good2.bvh", "z.bvh")]
     assert motions[1].frame_time == 0.01
     assert [str(e).split(":")[0] for e in errors] == [
         str(tmp_path / "b" / "bad_count.bvh"), str(tmp_path / "b" / "d_bad_channel.bvh")]
-    assert all(isinstance(e, BVHError) for e in errors)
+    assert all(isinstance(e, bvh.BVHError) for e in errors)
     assert "unknown channel name" in str(errors[1])
 
 
 def test_read_bvh_dir_pattern_and_clean_tree(tmp_path):
     make_tree(tmp_path)
-    motions, errors = read_bvh_dir(tmp_path, pattern="good*.bvh")
+    motions, errors = bvh.read_bvh_dir(tmp_path, pattern="good*.bvh")
     assert len(motions) == 2 and errors == []
     with pytest.raises(NotADirectoryError):
-        read_bvh_dir(tmp_path / "missing")
+        bvh.read_bvh_dir(tmp_path / "missing")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -505,39 +504,39 @@ def test_read_bvh_dir_pattern_and_clean_tree(tmp_path):
 def test_write_into_missing_directory(tmp_path):
     target = tmp_path / "no" / "such" / "dir" / "x.bvh"
     with pytest.raises(OSError):
-        write_bvh(target, parse_bvh(SMALL))
+        bvh.write_bvh(target, bvh.parse_bvh(SMALL))
     assert list(tmp_path.iterdir()) == []
 
 
 def test_write_nan_motion_raises_and_leaves_no_file(tmp_path):
-    m = parse_bvh(SMALL)
+    m = bvh.parse_bvh(SMALL)
     values = m.values.copy()
     values[1, 4] = np.nan
-    with pytest.raises(BVHError, match="NaN or infinite value in frame 2"):
-        write_bvh(tmp_path / "nan.bvh", dataclasses.replace(m, values=values))
+    with pytest.raises(bvh.BVHError, match="NaN or infinite value in frame 2"):
+        bvh.write_bvh(tmp_path / "nan.bvh", dataclasses.replace(m, values=values))
     assert list(tmp_path.iterdir()) == []
 
 
 def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
     path = tmp_path / "keep.bvh"
     path.write_text("old contents")
-    m = parse_bvh(SMALL)
-    with pytest.raises(BVHError, match="values have shape"):
-        write_bvh(path, dataclasses.replace(m, values=m.values[:, :5]))
+    m = bvh.parse_bvh(SMALL)
+    with pytest.raises(bvh.BVHError, match="values have shape"):
+        bvh.write_bvh(path, dataclasses.replace(m, values=m.values[:, :5]))
 
     def broken_replace(src, dst):
         raise OSError("disk full (simulated)")
 
     monkeypatch.setattr(os, "replace", broken_replace)
     with pytest.raises(OSError, match="simulated"):
-        write_bvh(path, m)
+        bvh.write_bvh(path, m)
     assert path.read_text() == "old contents"
     assert list(tmp_path.iterdir()) == [path]
 
 
 @pytest.mark.parametrize("problem", ["frame_time", "zero_frames", "end_site_with_child", "not_dfs", "name"])
 def test_write_rejects_unwritable_motions(tmp_path, problem):
-    m = parse_bvh(SMALL)
+    m = bvh.parse_bvh(SMALL)
     sk = m.skeleton
     if problem == "frame_time":
         m = dataclasses.replace(m, frame_time=0.0)
@@ -552,8 +551,8 @@ def test_write_rejects_unwritable_motions(tmp_path, problem):
         m = dataclasses.replace(m, skeleton=dataclasses.replace(sk, parents=(-1, 0, 0, 1, 3, 4)))
     else:
         m = dataclasses.replace(m, skeleton=dataclasses.replace(sk, names=("a{b",) + sk.names[1:]))
-    with pytest.raises(BVHError, match=re.escape(str(tmp_path / "x.bvh")) + ": "):
-        write_bvh(tmp_path / "x.bvh", m)
+    with pytest.raises(bvh.BVHError, match=re.escape(str(tmp_path / "x.bvh")) + ": "):
+        bvh.write_bvh(tmp_path / "x.bvh", m)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -561,7 +560,7 @@ def test_write_preserves_existing_file_mode(tmp_path):
     path = tmp_path / "mode.bvh"
     path.write_text("x")
     path.chmod(0o640)
-    write_bvh(path, parse_bvh(SMALL))
+    bvh.write_bvh(path, bvh.parse_bvh(SMALL))
     assert path.stat().st_mode & 0o777 == 0o640
-    write_bvh(tmp_path / "new.bvh", parse_bvh(SMALL))
+    bvh.write_bvh(tmp_path / "new.bvh", bvh.parse_bvh(SMALL))
     assert (tmp_path / "new.bvh").stat().st_mode & 0o777 == 0o644

@@ -2,20 +2,20 @@ from pathlib import Path
 
 import pytest
 
-from motiongan_jax.config import ConfigError, config_hash, load_config, override, validate
+from motiongan_jax import config as C
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
 @pytest.mark.parametrize("name", ["small", "tiny"])
 def test_embedded_data_configs_load(name):
-    assert load_config(CONFIGS / f"{name}.py").name == name
+    assert C.load_config(CONFIGS / f"{name}.py").name == name
 
 
 @pytest.mark.parametrize("name", ["paper", "bandai", "bandai_small"])
 def test_real_data_configs_need_a_data_dir(name):
-    with pytest.raises(ConfigError, match=r"data\.data_dir"):
-        load_config(CONFIGS / f"{name}.py")
+    with pytest.raises(C.ConfigError, match=r"data\.data_dir"):
+        C.load_config(CONFIGS / f"{name}.py")
 
 
 def test_paper_config_is_the_papers(tmp_path):
@@ -24,34 +24,34 @@ def test_paper_config_is_the_papers(tmp_path):
     spec = importlib.util.spec_from_file_location("paper_cfg", CONFIGS / "paper.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    cfg = override(mod.get_config(), [f"data.data_dir={tmp_path}"])
-    validate(cfg)
+    cfg = C.override(mod.get_config(), [f"data.data_dir={tmp_path}"])
+    C.validate(cfg)
     assert (cfg.train.batch_size, cfg.data.window_T, cfg.train.num_steps) == (24, 128, 200_000)
     assert len(cfg.data.styles) == 28 and cfg.data.styles[0] == "Cat" and cfg.data.styles[-1] == "Sneaky"
     assert (cfg.train.lr_d, cfg.train.lr_g, cfg.train.beta1, cfg.train.beta2) == (1e-4, 2e-4, 0.5, 0.999)
 
 
 def test_override_types_and_errors():
-    cfg = load_config(CONFIGS / "tiny.py")
-    cfg2 = override(cfg, ["train.batch_size=8", "train.lr_g=0.001", "data.rotate=False",
-                          "data.fps_factors=(1.0,)", "name=x"])
+    cfg = C.load_config(CONFIGS / "tiny.py")
+    cfg2 = C.override(cfg, ["train.batch_size=8", "train.lr_g=0.001", "data.rotate=False",
+                            "data.fps_factors=(1.0,)", "name=x"])
     assert cfg2.train.batch_size == 8 and cfg2.train.lr_g == 0.001 and cfg2.data.rotate is False
     assert cfg2.data.fps_factors == (1.0,) and cfg2.name == "x"
-    assert override(cfg, ["data.fps_factors=1.5"]).data.fps_factors == (1.5,)
+    assert C.override(cfg, ["data.fps_factors=1.5"]).data.fps_factors == (1.5,)
     # booleans from true/false; "none" is None only for fields that may be None
-    assert override(cfg, ["model.d_cond=true"]).model.d_cond is True
-    assert override(cfg, ["compute.conv_impl=xla"]).compute.conv_impl == "xla"
-    with pytest.raises(ConfigError, match="model.output_prior"):
-        override(cfg, ["model.output_prior=none"])
-    assert override(cfg, ["data.data_dir=/x", "data.data_dir=none"]).data.data_dir is None
-    assert config_hash(cfg) != config_hash(cfg2)
-    assert config_hash(cfg) == config_hash(load_config(CONFIGS / "tiny.py"))
-    with pytest.raises(ConfigError, match="train.nope"):
-        override(cfg, ["train.nope=1"])
-    with pytest.raises(ConfigError, match="train.batch_size"):
-        override(cfg, ["train.batch_size=abc"])
-    with pytest.raises(ConfigError, match="not of the form"):
-        override(cfg, ["train.batch_size"])
+    assert C.override(cfg, ["model.d_cond=true"]).model.d_cond is True
+    assert C.override(cfg, ["compute.conv_impl=xla"]).compute.conv_impl == "xla"
+    with pytest.raises(C.ConfigError, match="model.output_prior"):
+        C.override(cfg, ["model.output_prior=none"])
+    assert C.override(cfg, ["data.data_dir=/x", "data.data_dir=none"]).data.data_dir is None
+    assert C.config_hash(cfg) != C.config_hash(cfg2)
+    assert C.config_hash(cfg) == C.config_hash(C.load_config(CONFIGS / "tiny.py"))
+    with pytest.raises(C.ConfigError, match="train.nope"):
+        C.override(cfg, ["train.nope=1"])
+    with pytest.raises(C.ConfigError, match="train.batch_size"):
+        C.override(cfg, ["train.batch_size=abc"])
+    with pytest.raises(C.ConfigError, match="not of the form"):
+        C.override(cfg, ["train.batch_size"])
 
 
 @pytest.mark.parametrize("assignment, field", [
@@ -72,19 +72,19 @@ def test_override_types_and_errors():
     ("train.g_ema_decay=-0.1", "train.g_ema_decay"),
 ])
 def test_invalid_values_name_the_field(assignment, field):
-    cfg = load_config(CONFIGS / "tiny.py")
-    with pytest.raises(ConfigError, match=field.replace(".", r"\.")):
-        validate(override(cfg, [assignment]))
+    cfg = C.load_config(CONFIGS / "tiny.py")
+    with pytest.raises(C.ConfigError, match=field.replace(".", r"\.")):
+        C.validate(C.override(cfg, [assignment]))
 
 
 def test_saved_configs_with_a_retired_option_off_still_load():
     from motiongan_jax.config import from_dict, to_dict
 
-    d = to_dict(load_config(CONFIGS / "tiny.py"))
+    d = to_dict(C.load_config(CONFIGS / "tiny.py"))
     d["model"]["phase_wavelengths_m"] = []  # what configs saved before its removal hold
-    assert from_dict(d) == load_config(CONFIGS / "tiny.py")
+    assert from_dict(d) == C.load_config(CONFIGS / "tiny.py")
     d["model"]["phase_wavelengths_m"] = [1.2]
-    with pytest.raises(ConfigError, match="model.phase_wavelengths_m.*no longer exists"):
+    with pytest.raises(C.ConfigError, match="model.phase_wavelengths_m.*no longer exists"):
         from_dict(d)
 
 
@@ -92,10 +92,9 @@ FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
 
 def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_documented():
-    from motiongan_jax import config as C
 
     for name, make in C.PRESETS.items():
-        assert load_config(CONFIGS / f"{name}.py", check=False) == make() == C.preset(name)
+        assert C.load_config(CONFIGS / f"{name}.py", check=False) == make() == C.preset(name)
         assert make().name == name
     paper, small = C.paper().model, C.small().model
     # the small model turns every model option on; the paper's keeps every default
@@ -103,21 +102,20 @@ def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_docum
     assert (small.output_prior, small.d_cond, small.exact_bones, small.gait_phase, small.root_height,
             small.g_frame, small.latent_init) == (True, True, True, True, True, "curve", "torch_default")
     assert C.bandai_small().model == small and C.bandai_small().data.frame_nums == 64
-    with pytest.raises(ConfigError, match="unknown preset 'cpu'"):
+    with pytest.raises(C.ConfigError, match="unknown preset 'cpu'"):
         C.preset("cpu")
 
 
 def test_each_option_lists_its_values_once_and_validate_reads_them():
-    from motiongan_jax import config as C
 
     assert C.choices(C.GFrame) == ("world", "curve")
     for field, literal in (("model.g_frame", C.GFrame), ("model.latent_init", C.LatentInit),
                            ("train.gan_loss", C.GanLoss), ("compute.conv_impl", C.ConvImpl),
                            ("compute.compute_dtype", C.ComputeDtype), ("data.label_rule", C.LabelRule)):
         for value in C.choices(literal):  # every listed value validates ...
-            validate(override(C.tiny(), [f"{field}={value}"]), need_data=False)
-        with pytest.raises(ConfigError, match=field.replace(".", r"\.") + ".*not one of"):
-            validate(override(C.tiny(), [f"{field}=bogus"]))  # ... and nothing else
+            C.validate(C.override(C.tiny(), [f"{field}={value}"]), need_data=False)
+        with pytest.raises(C.ConfigError, match=field.replace(".", r"\.") + ".*not one of"):
+            C.validate(C.override(C.tiny(), [f"{field}=bogus"]))  # ... and nothing else
 
 
 def test_a_run_config_written_before_the_compute_section_loads_as_the_small_preset():
@@ -127,26 +125,25 @@ def test_a_run_config_written_before_the_compute_section_loads_as_the_small_pres
     import json
 
     from motiongan_jax.train import checkpoint
-    from motiongan_jax import config as C
 
     meta = json.loads((FIXTURES / "run_config_cpu_before_presets.json").read_text())
     old = meta["config"]
     assert old["name"] == "cpu" and old["model"]["d_cond"] == "projection" and "conv_impl" in old["model"]
     cfg = C.from_dict(old)
     # fields added since take the values that keep the run's behaviour, not the preset's new ones
-    assert cfg == override(C.small(), ["train.num_steps=300", "train.w_g_root_jerk=0", "train.rec_z=zero"])
+    assert cfg == C.override(C.small(), ["train.num_steps=300", "train.w_g_root_jerk=0", "train.rec_z=zero"])
     assert C.to_dict(C.from_dict(C.to_dict(cfg))) == C.to_dict(cfg)  # the new schema round-trips
     # the saved hash is the old dict's; the same config in the new schema hashes differently
-    assert meta["config_hash"] == config_hash(old) != config_hash(cfg)
+    assert meta["config_hash"] == C.config_hash(old) != C.config_hash(cfg)
     # a run of the same config resumes from it: the model sections agree whole
     checkpoint.check_compatible(meta, {"model": C.to_dict(cfg)["model"], "window_T": cfg.data.window_T}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
-        checkpoint.check_compatible(meta, {"model": C.to_dict(override(cfg, ["model.d_cond=false"]))["model"]},
+        checkpoint.check_compatible(meta, {"model": C.to_dict(C.override(cfg, ["model.d_cond=false"]))["model"]},
                                     "here")
     # a saved config that used a retired option, or an old value with no boolean, is refused
     for section, name, value in (("model", "d_frame", "window"), ("model", "use_z", "zeros"),
                                  ("model", "length_unit", 1.0), ("model", "output_prior", "bogus")):
         bad = json.loads(json.dumps(old))
         bad[section][name] = value
-        with pytest.raises(ConfigError, match=f"{section}.{name}"):
+        with pytest.raises(C.ConfigError, match=f"{section}.{name}"):
             C.from_dict(bad)

@@ -13,9 +13,8 @@ from scipy.integrate import quad
 from scipy.interpolate import CubicSpline, interp1d
 
 from motiongan_jax.data import curves
-from motiongan_jax.data.curves import DegenerateCurveError, CurveFileError
 
-I = 16  # small control-point interval keeps every test tiny
+I = 16  # noqa: E741 - the paper's name for the control-point interval; small keeps every test tiny
 
 
 def knot_frames(length, interval=I):
@@ -369,7 +368,7 @@ def test_resample_polyline_count_spacing_and_smoothing():
     np.testing.assert_allclose(sm3[[0, -1]], poly[[0, -1]], atol=1e-6)
     with pytest.raises(ValueError, match="not both"):
         curves.resample_polyline(pts, num_points=3, spacing=0.1)
-    with pytest.raises(DegenerateCurveError, match="shorter than one spacing"):
+    with pytest.raises(curves.DegenerateCurveError, match="shorter than one spacing"):
         curves.resample_polyline(pts, spacing=5.0)
 
 
@@ -382,9 +381,9 @@ def test_resample_polyline_count_spacing_and_smoothing():
     ([], r"\(P, 2\)"),
 ])
 def test_degenerate_curves(points, match):
-    with pytest.raises(DegenerateCurveError, match=match):
+    with pytest.raises(curves.DegenerateCurveError, match=match):
         curves.check_curve(points, "my curve")
-    with pytest.raises(DegenerateCurveError, match="curve"):
+    with pytest.raises(curves.DegenerateCurveError, match="curve"):
         curves.resample_polyline(points, num_points=4)
 
 
@@ -401,16 +400,16 @@ def test_loaders(tmp_path):
 
 
 @pytest.mark.parametrize("name, text, err, match", [
-    ("bad.csv", "x,z\n0,0\n1,oops\n", CurveFileError, "line 3"),
-    ("cols.csv", "0,0,0\n1,1,1\n", CurveFileError, "2 columns"),
-    ("empty.csv", "x,z\n", CurveFileError, "no x,z rows"),
-    ("nan.csv", "0,0\nnan,1\n", DegenerateCurveError, "not finite"),
-    ("one.csv", "0,0\n", DegenerateCurveError, "at least 2"),
-    ("bad.json", "[[0, 0], [1, 1]", CurveFileError, "invalid JSON"),
-    ("key.json", '{"pts": []}', CurveFileError, "no 'points' key"),
-    ("pair.json", "[[0, 0], [1]]", CurveFileError, "point 1"),
-    ("same.json", "[[1, 1], [1, 1]]", DegenerateCurveError, "zero length"),
-    ("curve.npy", "", CurveFileError, "unsupported"),
+    ("bad.csv", "x,z\n0,0\n1,oops\n", curves.CurveFileError, "line 3"),
+    ("cols.csv", "0,0,0\n1,1,1\n", curves.CurveFileError, "2 columns"),
+    ("empty.csv", "x,z\n", curves.CurveFileError, "no x,z rows"),
+    ("nan.csv", "0,0\nnan,1\n", curves.DegenerateCurveError, "not finite"),
+    ("one.csv", "0,0\n", curves.DegenerateCurveError, "at least 2"),
+    ("bad.json", "[[0, 0], [1, 1]", curves.CurveFileError, "invalid JSON"),
+    ("key.json", '{"pts": []}', curves.CurveFileError, "no 'points' key"),
+    ("pair.json", "[[0, 0], [1]]", curves.CurveFileError, "point 1"),
+    ("same.json", "[[1, 1], [1, 1]]", curves.DegenerateCurveError, "zero length"),
+    ("curve.npy", "", curves.CurveFileError, "unsupported"),
 ])
 def test_malformed_files_name_the_file(tmp_path, name, text, err, match):
     f = tmp_path / name
@@ -421,12 +420,12 @@ def test_malformed_files_name_the_file(tmp_path, name, text, err, match):
 
 
 def test_missing_file_and_root_positions(tmp_path):
-    with pytest.raises(CurveFileError, match="nope.csv"):
+    with pytest.raises(curves.CurveFileError, match="nope.csv"):
         curves.load_curve_file(tmp_path / "nope.csv")
     root = np.array([[0.0, 0.9, 0.0], [0.1, 0.95, 0.2], [0.3, 0.9, 0.1]])
     np.testing.assert_array_equal(curves.floor_path(root), root[:, [0, 2]])
     np.testing.assert_array_equal(curves.curve_from_root_positions(root), root[:, [0, 2]])
-    with pytest.raises(DegenerateCurveError, match="zero length"):
+    with pytest.raises(curves.DegenerateCurveError, match="zero length"):
         curves.curve_from_root_positions(np.zeros((5, 3)))
 
 

@@ -2,17 +2,15 @@ import dataclasses
 import re
 from pathlib import Path
 
-
 import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from motiongan_jax.data import dataset as data
 from motiongan_jax.config import DataConfig
-from motiongan_jax.data.dataset import Clip, FileLabel, build_arrays, label_from_filename, make_sample_batch
-from motiongan_jax.motion.representation import RowLayout
+from motiongan_jax.data import dataset as data
+from motiongan_jax.motion import representation
 
 # ---------------------------------------------------------------------------------------------
 # labels, discovery, splits
@@ -31,14 +29,14 @@ from motiongan_jax.motion.representation import RowLayout
     ("142_22.bvh", "cmu", "Sneaky", 22),
 ])
 def test_labels_from_file_names(name, rule, style, trial):
-    label = label_from_filename(name, rule)
+    label = data.label_from_filename(name, rule)
     assert (label.style, label.trial) == (style, trial)
 
 
 def test_unlabelled_names():
-    assert label_from_filename("131_01.bvh", "cmu") is None  # not a styled-walk trial
-    assert label_from_filename("walk.bvh", "paper") is None
-    assert label_from_filename("Sad_03.bvh", "bandai") is None
+    assert data.label_from_filename("131_01.bvh", "cmu") is None  # not a styled-walk trial
+    assert data.label_from_filename("walk.bvh", "paper") is None
+    assert data.label_from_filename("Sad_03.bvh", "bandai") is None
 
 
 TINY_BVH = """HIERARCHY
@@ -94,7 +92,7 @@ def test_cache_key_covers_contents_and_settings(tmp_path, monkeypatch):
     monkeypatch.setenv("MOTIONGAN_CACHE", str(tmp_path / "cache"))
     f = tmp_path / "Sad_01.bvh"
     f.write_text(TINY_BVH)
-    label = FileLabel("Sad", 1)
+    label = data.FileLabel("Sad", 1)
     fresh = data.preprocess_clip(f, label, 0.05, 0, use_cache=False)
     first = data.preprocess_clip(f, label, 0.05, 0)
     cached = list((tmp_path / "cache" / "clips").glob("*.npz"))
@@ -119,19 +117,19 @@ def test_cache_key_covers_contents_and_settings(tmp_path, monkeypatch):
 J_REL = 4
 
 
-def _layout() -> RowLayout:
+def _layout() -> representation.RowLayout:
     names = ("root",) + tuple(f"j{k}" for k in range(1, J_REL + 1))
-    return RowLayout(names, (-1, 0, 1, 0, 3), tuple(range(J_REL + 1)),
-                     ((0, 1), (1, 2), (0, 3), (3, 4)), np.ones(4))
+    return representation.RowLayout(names, (-1, 0, 1, 0, 3), tuple(range(J_REL + 1)),
+                                    ((0, 1), (1, 2), (0, 3), (3, 4)), np.ones(4))
 
 
-def _straight_clip(n: int, speed: float, label: str, rng) -> Clip:
+def _straight_clip(n: int, speed: float, label: str, rng) -> data.Clip:
     """A root moving along +x at `speed` m/frame, at 1 m height, with a random rigid pose."""
     t = np.arange(n, dtype=np.float32)
     root = np.stack([speed * t, np.ones(n), np.zeros(n)], -1).astype(np.float32)
     pose_J3 = rng.normal(size=(J_REL, 3)).astype(np.float32)
     pose = np.broadcast_to(pose_J3.reshape(-1), (n, 3 * J_REL)).copy()
-    return Clip(f"{label}.bvh", FileLabel(label, 1), 120.0, root, pose, _layout())
+    return data.Clip(f"{label}.bvh", data.FileLabel(label, 1), 120.0, root, pose, _layout())
 
 
 CFG = DataConfig(frame_nums=128, frame_step=8, control_point_interval=64, window_stride=4,
@@ -145,8 +143,8 @@ def clips():
 
 
 def test_batch_shapes_and_straight_walk(clips):
-    arrays = build_arrays(clips, ("A", "B"), CFG)
-    sample = jax.jit(make_sample_batch(CFG, 6))
+    arrays = data.build_arrays(clips, ("A", "B"), CFG)
+    sample = jax.jit(data.make_sample_batch(CFG, 6))
     batch = sample(arrays, jax.random.key(0), 0)
     T = CFG.window_T
     chex.assert_shape(batch["root_BxTx3"], (6, T, 3))
@@ -164,8 +162,8 @@ def test_batch_shapes_and_straight_walk(clips):
 
 def test_batches_are_functions_of_key_and_step(clips):
     cfg = dataclasses.replace(CFG, curve_noise=0.02, rotate=True, fps_factors=(0.5, 1.0, 1.5))
-    arrays = build_arrays(clips, ("A", "B"), cfg)
-    sample = jax.jit(make_sample_batch(cfg, 4))
+    arrays = data.build_arrays(clips, ("A", "B"), cfg)
+    sample = jax.jit(data.make_sample_batch(cfg, 4))
     a = sample(arrays, jax.random.key(1), 3)
     b = sample(arrays, jax.random.key(1), 3)
     c = sample(arrays, jax.random.key(1), 4)
@@ -175,9 +173,9 @@ def test_batches_are_functions_of_key_and_step(clips):
 
 def test_rotation_keeps_shape_and_height(clips):
     cfg = dataclasses.replace(CFG, rotate=True)
-    arrays = build_arrays(clips, ("A", "B"), cfg)
-    plain = jax.jit(make_sample_batch(CFG, 8))(arrays, jax.random.key(2), 0)
-    rot = jax.jit(make_sample_batch(cfg, 8))(arrays, jax.random.key(2), 0)
+    arrays = data.build_arrays(clips, ("A", "B"), cfg)
+    plain = jax.jit(data.make_sample_batch(CFG, 8))(arrays, jax.random.key(2), 0)
+    rot = jax.jit(data.make_sample_batch(cfg, 8))(arrays, jax.random.key(2), 0)
     p0 = np.asarray(plain["pose_BxTxR"]).reshape(8, -1, J_REL, 3)
     p1 = np.asarray(rot["pose_BxTxR"]).reshape(8, -1, J_REL, 3)
     np.testing.assert_allclose(np.linalg.norm(p1, axis=-1), np.linalg.norm(p0, axis=-1), rtol=1e-5)
@@ -189,8 +187,8 @@ def test_rotation_keeps_shape_and_height(clips):
 
 def test_fps_augmentation_changes_the_step(clips):
     cfg = dataclasses.replace(CFG, fps_factors=(0.5, 1.0, 1.5))
-    arrays = build_arrays([clips[0]], ("A",), cfg)
-    batch = jax.jit(make_sample_batch(cfg, 64))(arrays, jax.random.key(3), 0)
+    arrays = data.build_arrays([clips[0]], ("A",), cfg)
+    batch = jax.jit(data.make_sample_batch(cfg, 64))(arrays, jax.random.key(3), 0)
     step_frames = np.round(np.diff(np.asarray(batch["root_BxTx3"])[..., 0], axis=1)[:, 0] / 0.01).astype(int)
     assert set(step_frames) <= {4, 8, 9, 10, 11, 12}
     assert {4, 8} <= set(step_frames)
@@ -207,7 +205,7 @@ def test_epochs_visit_each_window_once():
 
 def test_short_clips_are_reported(clips):
     with pytest.raises(data.DataError, match="frame_nums"):
-        build_arrays(clips, ("A", "B"), dataclasses.replace(CFG, frame_nums=512, frame_step=8))
+        data.build_arrays(clips, ("A", "B"), dataclasses.replace(CFG, frame_nums=512, frame_step=8))
 
 
 def test_bandai_dataset_end_to_end(shared_data, repo):
@@ -224,8 +222,8 @@ def test_bandai_dataset_end_to_end(shared_data, repo):
     skipped = int(re.search(r"skipping (\d+) clip", " ".join(messages)).group(1)) if messages else 0
     assert len(ds.train) + len(ds.val) + skipped == 522 and len(ds.train) + len(ds.val) > 400
     assert all(c.label.trial % 4 == 0 for c in ds.val) and all(c.label.trial % 4 for c in ds.train)
-    arrays = build_arrays(ds.train, ds.style_names, cfg)
-    batch = jax.jit(make_sample_batch(cfg, 8))(arrays, jax.random.key(0), 0)
+    arrays = data.build_arrays(ds.train, ds.style_names, cfg)
+    batch = jax.jit(data.make_sample_batch(cfg, 8))(arrays, jax.random.key(0), 0)
     chex.assert_shape(batch["pose_BxTxR"], (8, cfg.window_T, 60))
     chex.assert_tree_all_finite(batch)
     # a walk: the root travels ~1 m/s; hips ~0.9 m above the floor before rotation (rotation keeps y)
@@ -258,7 +256,6 @@ def test_gait_statistics_recover_the_embedded_styles(repo):
     gait parameters each clip was generated with (its styles.json entry)."""
     import json
 
-    from motiongan_jax.motion import representation
     from motiongan_jax.config import load_config
 
     cfg = load_config(repo / "configs" / "tiny.py").data

@@ -18,12 +18,13 @@ import pytest
 
 pytest.importorskip("flask")
 
-from motiongan_jax.motion import bvh  # noqa: E402
-from motiongan_jax.train import checkpoint  # noqa: E402
 from motiongan_jax.data import curves  # noqa: E402
-from motiongan_jax.generate import limits, styles as styles_lib, user_curves, walk, writers
 from motiongan_jax.demo import engine as E  # noqa: E402
 from motiongan_jax.demo import server  # noqa: E402
+from motiongan_jax.generate import limits, user_curves, walk, writers
+from motiongan_jax.generate import styles as styles_lib
+from motiongan_jax.motion import bvh  # noqa: E402
+from motiongan_jax.train import checkpoint  # noqa: E402
 
 RATE = 15.0
 SPEED = 1.2

@@ -14,13 +14,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-
 from conftest import load_cli
-from motiongan_jax.train import checkpoint
+
 from motiongan_jax.data import curves, synthetic
-from motiongan_jax.evaluation import evaluator
+from motiongan_jax.evaluation import clip_metrics, eval_curves, evaluator
 from motiongan_jax.motion import representation
-from motiongan_jax.evaluation import clip_metrics, eval_curves
+from motiongan_jax.train import checkpoint
 
 # ---------------------------------------------------------------------------------------------
 # canonicalisation
@@ -114,8 +113,8 @@ def test_clip_windows_positions():
 
 def test_foot_joints_by_name_and_by_height():
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    l, r = representation.foot_joints(layout)
-    assert {layout.joint_names[l], layout.joint_names[r]} == {"LeftToeBase", "RightToeBase"}
+    left_toe, right_toe = representation.foot_joints(layout)
+    assert {layout.joint_names[left_toe], layout.joint_names[right_toe]} == {"LeftToeBase", "RightToeBase"}
     renamed = layout.__class__(**{**layout.__dict__, "joint_names": tuple(f"j{i}" for i in range(layout.num_joints))})
     l2, r2 = representation.foot_joints(renamed)  # no names: the lowest joint on each side (toe end sites)
     rest = representation.rest_positions(layout)
@@ -232,7 +231,6 @@ def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
     from motiongan_jax.data import dataset as data
     from motiongan_jax.evaluation import metrics
     from motiongan_jax.generate import walk
-    from motiongan_jax.motion.representation import from_rows
 
     state, meta, cfg, layout = checkpoint.load_run(tiny_run)
     ds = data.load_dataset(cfg.data)
@@ -245,7 +243,7 @@ def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
         chex.assert_shape((t.real_heights_Tx2, t.gen_heights_Tx2), (n, 2))
         clip = next(c for c in ds.val if c.source == t.source)
         step = cfg.data.frame_step
-        real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
+        real = np.asarray(representation.from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
                                     layout))
         np.testing.assert_allclose(t.real_heights_Tx2, metrics.toe_heights(real[:, list(feet)]), atol=1e-9)
     plot = _load_cli(repo, "plot_gait")

@@ -3,9 +3,10 @@ import types
 
 import numpy as np
 import pytest
-
 from conftest import run_cli
+
 from motiongan_jax.motion import bvh, kinematics
+
 FILES = ("dataset-2_walk_normal_001.bvh", "dataset-2_walk_elderly_002.bvh", "dataset-2_walk-turn-left_active_001.bvh")
 
 

@@ -25,13 +25,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import FAST, compiled_call
 from flax import nnx
 
-from conftest import FAST, compiled_call
-from motiongan_jax.train import state as train_state, step as step_lib
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 from motiongan_jax.nn import Discriminator, Generator, conv, layers
-
+from motiongan_jax.train import state as train_state
+from motiongan_jax.train import step as step_lib
 
 
 def _rel(a, b, scale=None) -> float:

@@ -16,15 +16,15 @@ import chex
 import jax
 import numpy as np
 import pytest
-
 from conftest import FAST, load_cli
 from conftest import random_run as _random_run
-from motiongan_jax.motion import bvh, ik, kinematics, representation
-from motiongan_jax.train import checkpoint
+
+from motiongan_jax.config import load_config, override, to_dict
 from motiongan_jax.data import curves, synthetic
 from motiongan_jax.generate import limits, styles, user_curves, walk, writers
-from motiongan_jax.train import inference, state as train_state
-from motiongan_jax.config import load_config, override, to_dict
+from motiongan_jax.motion import bvh, ik, kinematics, representation
+from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.train import state as train_state
 
 T_LONG = 96
 SPEED = 1.2

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from motiongan_jax.motion import bvh, ik, kinematics, representation
 from motiongan_jax.data import synthetic
+from motiongan_jax.motion import bvh, ik, kinematics, representation
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from motiongan_jax.motion import bvh
-from motiongan_jax.motion.kinematics import euler_to_matrix, fk, local_transforms, world_positions
+from motiongan_jax.motion.kinematics import (
+    euler_to_matrix,
+    fk,
+    local_transforms,
+    world_positions,
+)
 
 ORDERS = ["".join(p) for p in itertools.permutations("XYZ")]
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from motiongan_jax.data import curves
-from motiongan_jax.train import losses
 from motiongan_jax.motion import representation
+from motiongan_jax.train import losses
 
 
 def test_bce_prob_hand():

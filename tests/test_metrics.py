@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from motiongan_jax.evaluation import metrics as M
 from motiongan_jax.analysis.style_space import pca
+from motiongan_jax.evaluation import metrics as M
 
 
 def _line(T, step_m, direction=(1.0, 0.0)):

@@ -16,6 +16,7 @@ import sys
 import time
 
 from conftest import assert_bit_identical
+
 from motiongan_jax.train import checkpoint
 
 # runs bin/train.py with an audit hook that records, on a descriptor opened before it, every
@@ -118,7 +119,7 @@ def test_two_processes_equal_one_with_two_devices_and_resume_after_sigkill(repo,
     (out0, _), (out1, _) = _finish(_start_pair(repo, run_dir, audit, "resumed", env))
     assert "resumed from checkpoint at step 2" in out0, out0
     # process 1 prints nothing of its own (gloo's C++ layer announces each rank's connection)
-    assert "done:" in out0 and [l for l in out1.splitlines() if not l.startswith("[Gloo]")] == [], out1
+    assert "done:" in out0 and [line for line in out1.splitlines() if not line.startswith("[Gloo]")] == [], out1
     # ... and after the kill and resume, still that run at step 4
     assert_bit_identical(checkpoint.load_run(ref_dir, 4, params="raw")[0],
                           checkpoint.load_run(run_dir, 4, params="raw")[0])

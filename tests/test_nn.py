@@ -9,17 +9,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import compiled, compiled_call
 from flax import nnx
 
-from conftest import compiled, compiled_call
-from motiongan_jax.nn import (Discriminator, Generator, SpectralNormState, count_params,
-                              init_split)
-from motiongan_jax.nn import layers
+from motiongan_jax.nn import (
+    Discriminator,
+    Generator,
+    SpectralNormState,
+    count_params,
+    init_split,
+    layers,
+)
 from motiongan_jax.nn.discriminator import flatten_channel_major
-
-
-
-
 
 TOP, T, B, C = 8, 16, 2, 4
 

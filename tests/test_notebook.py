@@ -91,8 +91,8 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     ns = _execute(_notebook(), {**PARAMS, "OUT": str(tmp_path / "out")}, _recording_display(shown))
 
     # the fallback loaded the shipped model
-    from motiongan_jax.train import pretrained
     from motiongan_jax.config import from_dict
+    from motiongan_jax.train import pretrained
 
     shipped = pretrained.read_export(pretrained.SHIPPED_MODEL)
     assert ns["WORKDIR"] is None and ns["cfg"].name == "small" == from_dict(shipped.meta["config"]).name

@@ -13,13 +13,13 @@ import chex
 import jax
 import numpy as np
 import pytest
-
 from conftest import load_cli, random_run
-from motiongan_jax.motion import bvh
-from motiongan_jax.train import checkpoint, pretrained
+
+from motiongan_jax.config import config_hash, from_dict, load_config, override
 from motiongan_jax.data import curves
 from motiongan_jax.generate import styles, user_curves, walk
-from motiongan_jax.config import config_hash, from_dict, load_config, override
+from motiongan_jax.motion import bvh
+from motiongan_jax.train import checkpoint, pretrained
 
 SPEED = 1.2
 

@@ -1,10 +1,15 @@
 import numpy as np
 import pytest
-
 from expected import PAPER_BONES, PAPER_JOINTS
+
 from motiongan_jax.motion import bvh, kinematics
-from motiongan_jax.motion.representation import (bone_lengths, from_rows, layout_from_skeleton,
-                                          representation_root, to_rows)
+from motiongan_jax.motion.representation import (
+    bone_lengths,
+    from_rows,
+    layout_from_skeleton,
+    representation_root,
+    to_rows,
+)
 
 CMU_UNIT = 0.056444
 

@@ -10,13 +10,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import FAST
 from flax import nnx
 
-from conftest import FAST
-from motiongan_jax.train import inference, objectives, state as train_state, step as step_lib
-from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
-
+from motiongan_jax.nn import SpectralNormState
+from motiongan_jax.train import inference, objectives
+from motiongan_jax.train import state as train_state
+from motiongan_jax.train import step as step_lib
 
 J, T, B, C = 27, 16, 2, 4
 METRICS = ("d_adv", "d_cls", "d_total", "g_adv", "g_cls", "g_curve", "g_bone", "g_total",
@@ -334,8 +335,8 @@ def test_projection_d_judges_each_window_as_its_label():
 
 def test_project_bones_by_hand_and_identity_on_valid_poses():
     from motiongan_jax.data import synthetic
-    from motiongan_jax.nn.generator import project_bones
     from motiongan_jax.motion.representation import layout_from_skeleton, rest_positions
+    from motiongan_jax.nn.generator import project_bones
 
     # root -> 1 (length 2) -> 2 (length 1); raw rows r1 = (0, 3, 4), r2 = r1 + (5, 0, 0)
     raw = jnp.array([[[0.0, 3.0, 4.0, 5.0, 3.0, 4.0]]])
@@ -491,8 +492,8 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
     # The step's g_rec and g_root_jerk recomputed outside it, from G before the update: the first
     # window asks for its own style at its own phase, with z = 0 or with the z drawn for it.
     from motiongan_jax.data import curves
-    from motiongan_jax.train import losses
     from motiongan_jax.motion.representation import LENGTH_UNIT_M
+    from motiongan_jax.train import losses
 
     cfg0, gait = _gait_cfg()
     batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),

@@ -9,10 +9,10 @@ import json
 
 import numpy as np
 import pytest
-
 from expected import CMU_NAMES
-from motiongan_jax.motion import bvh, kinematics
+
 from motiongan_jax.data import synthetic
+from motiongan_jax.motion import bvh, kinematics
 from motiongan_jax.motion.representation import layout_from_skeleton
 
 U = synthetic.UNITS_TO_M

@@ -15,12 +15,13 @@ import time
 import jax
 import numpy as np
 import pytest
-
 from conftest import assert_bit_identical, load_cli, run_cli
-from motiongan_jax.train import checkpoint, loop as train_lib
-from motiongan_jax.data import curves, dataset as data
-from motiongan_jax.train import inference
+
 from motiongan_jax.config import override, to_dict
+from motiongan_jax.data import curves
+from motiongan_jax.data import dataset as data
+from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.train import loop as train_lib
 
 
 @pytest.fixture(scope="module")

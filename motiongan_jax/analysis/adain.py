@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
-from motiongan_jax.train import inference
 from motiongan_jax.nn.layers import AdaIN
+from motiongan_jax.train import inference
 
 
 def adain_styles(state, w_BxD) -> dict[str, tuple[jax.Array, jax.Array]]:

@@ -12,9 +12,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from motiongan_jax.analysis.style_space import AnalysisError
 from motiongan_jax.data import curves
 from motiongan_jax.motion.representation import RowLayout, to_rows
-from motiongan_jax.analysis.style_space import AnalysisError
 
 
 @dataclasses.dataclass(frozen=True)

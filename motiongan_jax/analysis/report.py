@@ -17,12 +17,14 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from motiongan_jax.analysis import clips, probe as probe_lib, search as search_lib, style_space
 from motiongan_jax import atomic, viz
+from motiongan_jax.analysis import clips, style_space
+from motiongan_jax.analysis import probe as probe_lib
+from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.data import curves
-from motiongan_jax.train import pretrained
 from motiongan_jax.evaluation import report as eval_report
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
+from motiongan_jax.train import pretrained
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,8 +87,11 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
     X, labels = codes.flat_samples
     p = style_space.pca(X)
     pts = style_space.pca_transform(p, X)
-    two = (lambda a: np.asarray(a)[:, :2] if np.asarray(a).shape[1] >= 2 else
-           np.pad(np.asarray(a), ((0, 0), (0, 2 - np.asarray(a).shape[1]))))
+
+    def two(a):  # the first two PCs, zero-padded when w has fewer
+        a = np.asarray(a)
+        return a[:, :2] if a.shape[1] >= 2 else np.pad(a, ((0, 0), (0, 2 - a.shape[1])))
+
     evr = np.asarray(p.explained_variance_ratio_K)
     dist = np.asarray(style_space.pairwise_distances(codes.centroids_CxD))
     nearest = style_space.nearest_styles(dist, names, k=min(3, C - 1))

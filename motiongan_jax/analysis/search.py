@@ -21,12 +21,12 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from motiongan_jax.data import curves
-from motiongan_jax.generate import walk
-from motiongan_jax.train import inference
-from motiongan_jax.motion.representation import LENGTH_UNIT_M, RowLayout
 from motiongan_jax.analysis.clips import MotionWindows
 from motiongan_jax.analysis.style_space import AnalysisError, StyleCodes
+from motiongan_jax.data import curves
+from motiongan_jax.generate import walk
+from motiongan_jax.motion.representation import LENGTH_UNIT_M, RowLayout
+from motiongan_jax.train import inference
 
 
 def search_schedule(peak_lr: float, steps: int, warmup: int):

@@ -52,11 +52,11 @@ def main(argv=None) -> int:
     if args.search_steps < 1 or args.search_keep < 1 or args.search_windows < 1 or args.search_random < 0:
         ap.error("--search-steps, --search-keep and --search-windows must be >= 1, --search-random >= 0")
 
-    from motiongan_jax.analysis.style_space import AnalysisError
     from motiongan_jax.analysis.report import Search, write_analysis
+    from motiongan_jax.analysis.style_space import AnalysisError
+    from motiongan_jax.data.curves import CurveFileError, DegenerateCurveError
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.train.checkpoint import CheckpointError
-    from motiongan_jax.data.curves import CurveFileError, DegenerateCurveError
 
     search = None if not args.search else Search(
         args.search, args.search_curve, steps=args.search_steps, lr=args.search_lr, keep=args.search_keep,

@@ -34,13 +34,14 @@ def main(argv=None) -> int:
                     help="synthetic curve shapes (comma-separated)")
     args = ap.parse_args(argv)
 
-    from motiongan_jax.train import checkpoint
-    from motiongan_jax.data import curves, dataset as data
-    from motiongan_jax.evaluation import evaluator
-    from motiongan_jax.evaluation import protocol, report as eval_report
+    from motiongan_jax.config import ConfigError
+    from motiongan_jax.data import curves
+    from motiongan_jax.data import dataset as data
+    from motiongan_jax.evaluation import evaluator, protocol
+    from motiongan_jax.evaluation import report as eval_report
     from motiongan_jax.generate import limits
     from motiongan_jax.motion.bvh import BVHError
-    from motiongan_jax.config import ConfigError
+    from motiongan_jax.train import checkpoint
 
     try:
         try:

@@ -79,11 +79,11 @@ def main(argv=None) -> int:
                          "children best-fit; exact: every bone direction exact, zero-length branch joints added")
     args = ap.parse_args(argv)
 
-    from motiongan_jax.train import checkpoint, pretrained
     from motiongan_jax.data import curves
     from motiongan_jax.generate import limits, styles, user_curves, walk, writers
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.motion.ik import IKError
+    from motiongan_jax.train import checkpoint, pretrained
 
     errors = (limits.GenerateError, checkpoint.CheckpointError, curves.DegenerateCurveError,
               curves.CurveFileError, BVHError, IKError, OSError)

@@ -24,13 +24,13 @@ def main(argv=None) -> int:
 
     import dataclasses
 
-    from motiongan_jax.train import checkpoint
-    from motiongan_jax.data import dataset as data
-    from motiongan_jax.motion import representation
     from motiongan_jax import viz
+    from motiongan_jax.config import ConfigError
+    from motiongan_jax.data import dataset as data
     from motiongan_jax.evaluation import clip_metrics
     from motiongan_jax.generate import limits, walk
-    from motiongan_jax.config import ConfigError
+    from motiongan_jax.motion import representation
+    from motiongan_jax.train import checkpoint
 
     try:
         if not args.seconds > 0:

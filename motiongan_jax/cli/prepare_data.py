@@ -9,10 +9,10 @@ joint_names, parents, clip_start, clip_length, clip_style, style_names, fps, sou
 import argparse
 import sys
 
-from motiongan_jax.motion.bvh import BVHError
-from motiongan_jax.data.dataset import DataError
 from motiongan_jax.config import LabelRule, choices
+from motiongan_jax.data.dataset import DataError
 from motiongan_jax.data.export import export_positions
+from motiongan_jax.motion.bvh import BVHError
 
 
 def main(argv=None) -> int:

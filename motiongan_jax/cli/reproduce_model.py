@@ -22,10 +22,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
 
-    from motiongan_jax.train import pretrained
-    from motiongan_jax.train.checkpoint import CheckpointError
     from motiongan_jax.config import ConfigError, from_dict, validate
     from motiongan_jax.data.dataset import DataError
+    from motiongan_jax.train import pretrained
+    from motiongan_jax.train.checkpoint import CheckpointError
     from motiongan_jax.train.loop import train
 
     try:

@@ -35,11 +35,11 @@ def main(argv=None) -> int:
     ap.add_argument("--process-id", type=int, default=None)
     args = ap.parse_args(argv)
 
-    from motiongan_jax.motion.bvh import BVHError
-    from motiongan_jax.train.checkpoint import CheckpointError
     from motiongan_jax.config import ConfigError, load_config, override, validate
     from motiongan_jax.data.dataset import DataError
-    from motiongan_jax.train.parallel import DistributedError
+    from motiongan_jax.motion.bvh import BVHError
+    from motiongan_jax.train import parallel
+    from motiongan_jax.train.checkpoint import CheckpointError
 
     try:
         cfg = load_config(args.config, check=False)
@@ -56,14 +56,13 @@ def main(argv=None) -> int:
 
             print(describe(cfg))
             return 0
-        from motiongan_jax.train import parallel
         from motiongan_jax.train.loop import NonFiniteError, train
 
         # several processes: from the flags, the variables or the launcher (docs/PERFORMANCE.md)
         parallel.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
         last = train(cfg, args.workdir, progress=not args.no_progress)
         primary = parallel.is_primary()
-    except (ConfigError, DataError, BVHError, CheckpointError, DistributedError) as err:
+    except (ConfigError, DataError, BVHError, CheckpointError, parallel.DistributedError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     except NonFiniteError as err:

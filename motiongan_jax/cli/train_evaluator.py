@@ -33,10 +33,16 @@ def main(argv=None) -> int:
 
     import jax
 
+    from motiongan_jax.config import (
+        ConfigError,
+        from_dict,
+        load_config,
+        override,
+        validate,
+    )
     from motiongan_jax.data import dataset as data
     from motiongan_jax.evaluation import evaluator, metrics
     from motiongan_jax.motion.bvh import BVHError
-    from motiongan_jax.config import ConfigError, from_dict, load_config, override, validate
 
     try:
         if args.workdir:

@@ -22,11 +22,18 @@ from scipy.ndimage import gaussian_filter1d, uniform_filter1d
 from scipy.signal import hilbert
 
 from motiongan_jax import atomic
-from motiongan_jax.motion import bvh, kinematics
+from motiongan_jax.config import DataConfig
 from motiongan_jax.data import curves
 from motiongan_jax.evaluation import metrics
-from motiongan_jax.config import DataConfig
-from motiongan_jax.motion.representation import UNITS_TO_M, RowLayout, foot_joints, from_rows, layout_from_skeleton, to_rows
+from motiongan_jax.motion import bvh, kinematics
+from motiongan_jax.motion.representation import (
+    UNITS_TO_M,
+    RowLayout,
+    foot_joints,
+    from_rows,
+    layout_from_skeleton,
+    to_rows,
+)
 
 # Bump when preprocessing changes what it computes: part of every cache key.
 CACHE_VERSION = "1"

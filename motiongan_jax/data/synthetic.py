@@ -60,7 +60,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 from scipy.spatial.transform import Rotation
 
-from motiongan_jax.motion.bvh import Motion, Skeleton
+from motiongan_jax.motion.bvh import Motion, Skeleton, write_bvh
 from motiongan_jax.motion.representation import CMU_UNIT_M
 
 # Bump whenever generation changes what it writes: it names the cache directory.
@@ -643,8 +643,6 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
     Atomic: everything is written into a temporary directory beside out_dir, which is then
     renamed. If out_dir exists: FileExistsError, unless overwrite (then it is replaced).
     Each clip is `seconds` of walking plus the T-pose frame 0. Same arguments -> same bytes."""
-    from motiongan_jax.motion import bvh
-
     out = Path(out_dir)
     names = list(STYLES) if styles is None else list(styles)
     unknown = [s for s in names if s not in STYLES]
@@ -663,7 +661,7 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
                 fname = f"{style}_{n:02d}.bvh"
                 motion = generate_clip(STYLES[style], key_or_seed=clip_seed(seed, style, n),
                                        num_frames=num_frames, fps=fps, source=fname)
-                bvh.write_bvh(tmp / fname, motion, precision=4)
+                write_bvh(tmp / fname, motion, precision=4)
         manifest = dataset_manifest(seed=seed, clips_per_style=clips_per_style, seconds=seconds,
                                     fps=fps, styles=names)
         (tmp / "styles.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
@@ -683,7 +681,9 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
 def default_dataset_dir(seed: int = 0) -> Path:
     """$MOTIONGAN_CACHE (default ~/.cache/motiongan_jax)/synthetic-v{VERSION}-seed{seed}, generated
     with the default settings if missing. Safe when processes race: the loser uses the winner's."""
-    from motiongan_jax.data.dataset import cache_root  # not at the top: data imports this module
+    from motiongan_jax.data.dataset import (
+        cache_root,  # not at the top: data imports this module
+    )
 
     out = cache_root() / f"synthetic-v{VERSION}-seed{int(seed)}"
     if (out / "styles.json").is_file():

@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from motiongan_jax.data import curves
-from motiongan_jax.generate import styles as styles_lib, user_curves, walk, writers
+from motiongan_jax.generate import styles as styles_lib
+from motiongan_jax.generate import user_curves, walk, writers
 
 # Limits the server enforces on every request (each breach is a 400 naming it): an interactive
 # page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)

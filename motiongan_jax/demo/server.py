@@ -28,8 +28,8 @@ from flask import Flask, jsonify, request, send_from_directory
 from werkzeug.exceptions import HTTPException
 
 from motiongan_jax.data import curves
-from motiongan_jax.generate import limits
 from motiongan_jax.demo import engine as engine_lib
+from motiongan_jax.generate import limits
 from motiongan_jax.motion.ik import IKError
 
 STATIC = Path(__file__).resolve().parent / "static"

@@ -8,13 +8,12 @@ import dataclasses
 import jax
 import numpy as np
 
+from motiongan_jax.analysis import clips
 from motiongan_jax.data import curves
 from motiongan_jax.evaluation import metrics
-from motiongan_jax.analysis import clips
 from motiongan_jax.generate import styles, walk
-from motiongan_jax.train import inference
 from motiongan_jax.motion.representation import facing_joints, from_rows
-
+from motiongan_jax.train import inference
 
 PENETRATION_TOLERANCE_M = 0.02
 GAIT_KEYS = ("support", "lower_foot_height_m", "alternation", "step_frequency_hz", "step_amplitude_m",

@@ -4,7 +4,6 @@ can tell a gait at all.
 
 from __future__ import annotations
 
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,7 +12,6 @@ from scipy.ndimage import gaussian_filter1d
 
 from motiongan_jax.data import curves
 from motiongan_jax.train import inference
-
 
 PROBE_WINDOWS = 128  # real training windows the probe judges
 PROBE_SMOOTHING_SAMPLES = 2.0  # Gaussian sigma of the "no steps" window

@@ -10,10 +10,9 @@ from typing import Sequence
 
 import numpy as np
 
-from motiongan_jax.data import curves
 from motiongan_jax.analysis import clips as clips_lib
+from motiongan_jax.data import curves
 from motiongan_jax.generate import user_curves
-
 
 TURNING_DEG = 45.0  # a held-out path whose heading changes more than this is "turning"
 

@@ -23,10 +23,9 @@ import scipy.linalg
 import scipy.stats
 
 from motiongan_jax.motion import representation
-from motiongan_jax.motion.representation import CMU_UNIT_M
 
 # Reference foot-skate threshold (docs/DESIGN.md §5.4): 0.5 CMU units per 15 Hz sample, in metres.
-FOOT_SKATE_THRESHOLD_M = 0.5 * CMU_UNIT_M
+FOOT_SKATE_THRESHOLD_M = 0.5 * representation.CMU_UNIT_M
 
 _FLOOR = (0, 2)  # x and z: the floor-plane components of a Y-up position
 

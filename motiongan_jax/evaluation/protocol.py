@@ -19,16 +19,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax.train import checkpoint
-from motiongan_jax.data import dataset as data
-from motiongan_jax.evaluation import evaluator, metrics
-from motiongan_jax.analysis import clips as clips_lib, search as search_lib, style_space
-from motiongan_jax.generate import styles, walk
-from motiongan_jax.train import inference
+from motiongan_jax.analysis import clips as clips_lib
+from motiongan_jax.analysis import search as search_lib
+from motiongan_jax.analysis import style_space
 from motiongan_jax.config import ConfigError, config_hash
-from motiongan_jax.motion.representation import foot_joints, from_rows
-from motiongan_jax.evaluation.clip_metrics import cut_windows, gait_metrics, motion_metrics
-from motiongan_jax.evaluation.d_probe import discriminator_probe
+from motiongan_jax.data import dataset as data
+from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics
 from motiongan_jax.evaluation.eval_curves import (
     EvalCurve,
     file_curves,
@@ -37,8 +33,9 @@ from motiongan_jax.evaluation.eval_curves import (
     median_speed,
     shape_curves,
 )
-from motiongan_jax.evaluation import clip_metrics
-from motiongan_jax.evaluation import d_probe
+from motiongan_jax.generate import styles, walk
+from motiongan_jax.motion.representation import foot_joints, from_rows
+from motiongan_jax.train import checkpoint, inference
 
 
 class EvaluationError(ValueError):
@@ -90,7 +87,7 @@ def _real_block(ctx: Context) -> dict:
     contact = ctx.contact_height_m
     per = []
     for i in range(len(joints)):
-        per.append(motion_metrics(joints[i], None, ctx.layout, ctx.feet, ctx.sample_rate, contact))
+        per.append(clip_metrics.motion_metrics(joints[i], None, ctx.layout, ctx.feet, ctx.sample_rate, contact))
     # trajectory of real motion against its own (noise-free) curve, on the held-out curves
     traj = []
     for c in ctx.curves_:
@@ -110,7 +107,7 @@ def _real_block(ctx: Context) -> dict:
     for clip in ctx.val_clips:
         j = np.asarray(from_rows(clip.root_Fx3[::step], clip.pose_FxR[::step], ctx.layout), np.float64)
         if len(j) >= 4:
-            clips[clip.source] = {"style": clip.label.style, **gait_metrics(j, ctx.feet, ctx.sample_rate, contact)}
+            clips[clip.source] = {"style": clip.label.style, **clip_metrics.gait_metrics(j, ctx.feet, ctx.sample_rate, contact)}
     return {"logits": logits, "feats": feats, "labels": labels, "per_window": per, "traj": traj,
             "contact_height_m": contact, "joints": joints, "clips": clips}
 
@@ -132,7 +129,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
                  if inference.has_gait_phase(ctx.state) else None)
         gen = walk.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, np.asarray(w), phase)
         root = gen.positions[:, :, 0]
-        r, p, n = cut_windows(root, gen.pose, T)
+        r, p, n = clip_metrics.cut_windows(root, gen.pose, T)
         logits, feats = evaluator.classify(ctx.ev, r, p)
         win_logits.append(logits)
         win_feats.append(feats)
@@ -141,7 +138,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
         clip_feats = feats.reshape(C * s.k, n, -1).mean(1).reshape(C, s.k, -1)
         mm_groups.append(clip_feats)
         for b in range(C * s.k):
-            m = motion_metrics(gen.positions[b], c.curve_Lx3, ctx.layout, ctx.feet, ctx.sample_rate, contact)
+            m = clip_metrics.motion_metrics(gen.positions[b], c.curve_Lx3, ctx.layout, ctx.feet, ctx.sample_rate, contact)
             rows.append({"curve": c.name, "kind": c.kind, "source": c.source, "style": int(labels[b]), **m})
     return {"rows": rows, "logits": np.concatenate(win_logits), "feats": np.concatenate(win_feats),
             "labels": np.concatenate(win_labels), "mm": np.concatenate(mm_groups)}
@@ -153,7 +150,7 @@ def _long_curve_block(ctx: Context, seed: int) -> dict:
     z = jax.random.normal(jax.random.key(20_000 + seed), (C, inference.generator_z_dim(ctx.state)), jnp.float32)
     w = styles.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z)
     gen = walk.generate_motion(ctx.state, ctx.layout, ctx.long_curve.curve_Lx3, np.asarray(w))
-    rows = [gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m) for b in range(C)]
+    rows = [clip_metrics.gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m) for b in range(C)]
     return {f"long_{k}": _mean_key(rows, k) for k in clip_metrics.GAIT_KEYS}
 
 
@@ -184,7 +181,7 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
         for a, b in pairs:
             w = np.stack([(1 - t) * cents[a] + t * cents[b] for t in alphas])
             gen = walk.generate_motion(ctx.state, ctx.layout, line, w)
-            r, p, n = cut_windows(gen.positions[:, :, 0], gen.pose, T)
+            r, p, n = clip_metrics.cut_windows(gen.positions[:, :, 0], gen.pose, T)
             logits, _ = evaluator.classify(ctx.ev, r, p)
             pb = np.asarray(jax.nn.softmax(logits, -1))[:, b].reshape(len(alphas), n).mean(1)
             rhos.append(metrics.interpolation_monotonicity(alphas, pb))
@@ -193,7 +190,7 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
         triples = [(a, (a + 1) % C, (a + 2) % C) for a in range(C)]
         w = np.stack([cents[a] - cents[b] + cents[c] for a, b, c in triples])
         gen = walk.generate_motion(ctx.state, ctx.layout, line, w)
-        r, p, n = cut_windows(gen.positions[:, :, 0], gen.pose, T)
+        r, p, n = clip_metrics.cut_windows(gen.positions[:, :, 0], gen.pose, T)
         logits, _ = evaluator.classify(ctx.ev, r, p)
         pred = np.argmax(logits, -1).reshape(len(triples), n)
         ok = [np.mean((pred[i] == a) | (pred[i] == c)) for i, (a, b, c) in enumerate(triples)]
@@ -318,7 +315,7 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
         per_seed_style.append(st)
     log("style search on held-out clips")
     search = _search_block(ctx)
-    probe = {} if ctx.probe_batch is None else discriminator_probe(ctx.state, ctx.probe_batch, jax.random.key(30_000))
+    probe = {} if ctx.probe_batch is None else d_probe.discriminator_probe(ctx.state, ctx.probe_batch, jax.random.key(30_000))
 
     keys = list(per_seed[0])
     generated = {k: _ci([r.get(k, float("nan")) for r in per_seed]) for k in keys}

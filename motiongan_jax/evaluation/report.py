@@ -12,9 +12,8 @@ import numpy as np
 
 from motiongan_jax import atomic
 from motiongan_jax.analysis import style_space
-from motiongan_jax.evaluation.protocol import Context
 from motiongan_jax.evaluation import clip_metrics
-
+from motiongan_jax.evaluation.protocol import Context
 
 ROWS = [
     ("sra_top1", "style accuracy top-1 (evaluator)"),

@@ -9,10 +9,7 @@ samples per call, MAX_GIF_FRAMES frames x panels per GIF (Pillow holds every fra
 
 from __future__ import annotations
 
-
 import numpy as np
-
-
 
 # What one generation may ask for (module doc, README "Generating walks")
 MAX_CURVE_LENGTH_M = 10_000.0

@@ -26,9 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax.train import inference
 from motiongan_jax.generate.limits import GenerateError
-
+from motiongan_jax.train import inference
 
 FIGURES = ("styles", "interp", "arith")
 INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)

@@ -19,17 +19,7 @@ from typing import Callable
 import numpy as np
 
 from motiongan_jax.data import curves
-from motiongan_jax.generate.limits import (
-    GenerateError,
-    check_curve_limits,
-    check_point_count,
-    polyline_length,
-    too_long_message,
-)
-from motiongan_jax.generate.walk import padded_length
-from motiongan_jax.generate import limits
-from motiongan_jax.generate import walk
-
+from motiongan_jax.generate import limits, walk
 
 DEFAULT_SPEED_M_PER_S = 1.2
 SHAPE_POINTS_PER_M = 100  # built-in shapes are drawn at 1 cm before resampling (at most MAX_CURVE_POINTS)
@@ -62,29 +52,29 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
                 total = {"line": scale, "circle": 2 * math.pi * scale, "s_curve": 2 * math.pi * scale,
                          "figure8": 4 * math.pi * scale, "corner": 2 * scale}[text]
             if math.isfinite(total) and total > limits.MAX_CURVE_LENGTH_M:
-                raise GenerateError(too_long_message(f"curve {text!r}", total))
+                raise limits.GenerateError(limits.too_long_message(f"curve {text!r}", total))
             num = int(min(max(total * SHAPE_POINTS_PER_M, 256), limits.MAX_CURVE_POINTS))
             pts = curves.shape_curve(text, length=natural, scale=scale, num_points=num)
         except (ValueError, TypeError) as e:
-            if isinstance(e, (curves.DegenerateCurveError, GenerateError)):
+            if isinstance(e, (curves.DegenerateCurveError, limits.GenerateError)):
                 raise
-            raise GenerateError(f"curve {text!r}: {e}") from None
-        return Curve(pts, f"{text} (scale {scale:g} m, length {polyline_length(pts):.3g} m)")
+            raise limits.GenerateError(f"curve {text!r}: {e}") from None
+        return Curve(pts, f"{text} (scale {scale:g} m, length {limits.polyline_length(pts):.3g} m)")
     path = Path(text)
     if not path.is_file():
-        raise GenerateError(f"curve {text!r}: not a shape name ({', '.join(curves.SHAPES)}) and "
-                            f"no such file")
+        raise limits.GenerateError(f"curve {text!r}: not a shape name ({', '.join(curves.SHAPES)}) and "
+                                   f"no such file")
     size = path.stat().st_size
     if size > limits.MAX_CURVE_FILE_BYTES:
-        raise GenerateError(f"curve file {path}: {size / 2**20:.0f} MiB is larger than the limit of "
-                            f"{limits.MAX_CURVE_FILE_BYTES / 2**20:.0f} MiB (generate.limits.MAX_CURVE_FILE_BYTES)")
+        raise limits.GenerateError(f"curve file {path}: {size / 2**20:.0f} MiB is larger than the limit of "
+                                   f"{limits.MAX_CURVE_FILE_BYTES / 2**20:.0f} MiB (generate.limits.MAX_CURVE_FILE_BYTES)")
     if path.suffix.lower() == ".bvh":
         from motiongan_jax.motion import bvh
 
         motion = bvh.read_bvh(path)
-        check_point_count(motion.num_frames, f"curve {path.name}")
+        limits.check_point_count(motion.num_frames, f"curve {path.name}")
         pts = curves.curve_from_bvh(motion)
-        check_curve_limits(pts, f"curve {path.name}")
+        limits.check_curve_limits(pts, f"curve {path.name}")
         frames = len(pts)
         seconds = (frames - 1) * motion.frame_time
         interval = None
@@ -92,11 +82,11 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
             interval = max(2, int(round(control_seconds / motion.frame_time)))
         smoothed = pts if interval is None else curves.resample_polyline(pts, num_points=frames,
                                                                           smooth_interval=interval)
-        speed = polyline_length(smoothed) / seconds if seconds > 0 else None
+        speed = limits.polyline_length(smoothed) / seconds if seconds > 0 else None
         return Curve(pts, f"{path.name} (root path, {frames} frames, {seconds:.3g} s)",
                      speed if speed and speed > 0 else None, interval)
     pts = curves.load_curve_file(path)
-    check_curve_limits(pts, f"curve {path.name}")
+    limits.check_curve_limits(pts, f"curve {path.name}")
     return Curve(pts, f"{path.name}")
 
 
@@ -108,19 +98,19 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
     curve exceeds the limits (module doc), before it is resampled."""
     if not isinstance(curve, Curve):
         curve = Curve(curves.check_curve(curve, "curve"), "curve")
-    check_curve_limits(curve.points, f"curve {curve.description}")
+    limits.check_curve_limits(curve.points, f"curve {curve.description}")
     if speed is None:
         speed = curve.speed_m_per_s or DEFAULT_SPEED_M_PER_S
     speed = float(speed)
     if not (math.isfinite(speed) and speed > 0):
-        raise GenerateError(f"speed must be a positive number of m/s, got {speed}")
+        raise limits.GenerateError(f"speed must be a positive number of m/s, got {speed}")
     if not (math.isfinite(sample_rate) and sample_rate > 0):
-        raise GenerateError(f"sample rate must be positive, got {sample_rate}")
+        raise limits.GenerateError(f"sample rate must be positive, got {sample_rate}")
     spacing = speed / sample_rate
     # the samples resampling would give (smoothing only shortens a curve): refuse before allocating
-    expected = polyline_length(curve.points) / spacing + 1
+    expected = limits.polyline_length(curve.points) / spacing + 1
     if expected > limits.MAX_CURVE_SAMPLES:
-        raise GenerateError(
+        raise limits.GenerateError(
             f"curve {curve.description}: {expected:,.0f} samples at {spacing:.3g} m ({speed:.3g} m/s at "
             f"{sample_rate:g} Hz) are more than the limit of {limits.MAX_CURVE_SAMPLES:,} "
             f"({limits.MAX_CURVE_SAMPLES / sample_rate / 60:.0f} minutes at this rate; generate.limits.MAX_CURVE_SAMPLES): "
@@ -128,7 +118,7 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
     xz = curves.resample_polyline(curve.points, spacing=spacing, smooth_interval=curve.smooth_interval)
     M = len(xz)
     note = f"curve {curve.description}: {M} samples at {spacing:.3g} m ({speed:.3g} m/s at {sample_rate:g} Hz)"
-    if padded_length(M) > M:
+    if walk.padded_length(M) > M:
         note += (f"; walked in full: G takes a multiple of 8 samples (at least {walk.MIN_T}), so it walks on "
                  f"straight past the curve's end and the motion is cropped back to its {M} samples")
     if M > walk.CHUNK_T:

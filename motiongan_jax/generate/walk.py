@@ -34,11 +34,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from motiongan_jax.data import curves
-from motiongan_jax.train import inference
-from motiongan_jax.motion.representation import from_rows
-from motiongan_jax.generate.limits import GenerateError
 from motiongan_jax.generate import limits
-
+from motiongan_jax.motion.representation import from_rows
+from motiongan_jax.train import inference
 
 MIN_T = 16
 # How: one G call holds at most CHUNK_T samples of one motion and BATCH_SAMPLES in all
@@ -100,27 +98,27 @@ def generate_motion(state, layout, curve_Mx3, w_BxD, phase_offset_B=None, *, chu
     before G runs."""
     curve = np.asarray(curve_Mx3, np.float32)
     if curve.ndim != 2 or curve.shape[1] != 3 or curve.shape[0] < 2:
-        raise GenerateError(f"curve must be (M, 3) with M >= 2 samples, got shape {curve.shape}")
+        raise limits.GenerateError(f"curve must be (M, 3) with M >= 2 samples, got shape {curve.shape}")
     if not np.isfinite(curve).all():
-        raise GenerateError("curve has non-finite values")
+        raise limits.GenerateError("curve has non-finite values")
     w = np.asarray(w_BxD, np.float32)
     if w.ndim != 2 or len(w) == 0:
-        raise GenerateError(f"style codes must be (B, w_dim) with B >= 1, got shape {w.shape}")
+        raise limits.GenerateError(f"style codes must be (B, w_dim) with B >= 1, got shape {w.shape}")
     M, B = curve.shape[0], w.shape[0]
     if M > limits.MAX_CURVE_SAMPLES:
-        raise GenerateError(f"curve: {M:,} samples are more than the limit of {limits.MAX_CURVE_SAMPLES:,} "
-                            f"(generate.limits.MAX_CURVE_SAMPLES)")
+        raise limits.GenerateError(f"curve: {M:,} samples are more than the limit of {limits.MAX_CURVE_SAMPLES:,} "
+                                   f"(generate.limits.MAX_CURVE_SAMPLES)")
     if B * M > limits.MAX_TOTAL_SAMPLES:
-        raise GenerateError(f"{B} motions x {M:,} samples = {B * M:,} are more than the limit of "
-                            f"{limits.MAX_TOTAL_SAMPLES:,} (generate.limits.MAX_TOTAL_SAMPLES): ask for fewer styles or "
-                            f"noise draws at once, or a shorter curve")
+        raise limits.GenerateError(f"{B} motions x {M:,} samples = {B * M:,} are more than the limit of "
+                                   f"{limits.MAX_TOTAL_SAMPLES:,} (generate.limits.MAX_TOTAL_SAMPLES): ask for fewer styles or "
+                                   f"noise draws at once, or a shorter curve")
     if inference.has_gait_phase(state):
         phase = np.zeros(B) if phase_offset_B is None else np.asarray(phase_offset_B, np.float64)
         if phase.shape != (B,) or not np.isfinite(phase).all():
-            raise GenerateError(f"phase offsets must be {B} finite numbers (radians), one per motion, "
-                                f"got shape {phase.shape}")
+            raise limits.GenerateError(f"phase offsets must be {B} finite numbers (radians), one per motion, "
+                                       f"got shape {phase.shape}")
     elif phase_offset_B is not None:
-        raise GenerateError("a phase offset was given, but this model has no gait phase")
+        raise limits.GenerateError("a phase offset was given, but this model has no gait phase")
     else:
         phase = None
     vel_Tx3 = curves.velocity(jnp.asarray(extend_straight(curve, padded_length(M) - M))[None])[0]
@@ -131,7 +129,7 @@ def generate_motion(state, layout, curve_Mx3, w_BxD, phase_offset_B=None, *, chu
     root = start[:, None, :] + np.concatenate([np.zeros((B, 1, 3)), np.cumsum(root_vel[:, 1:], axis=1)], 1)
     joints = np.asarray(from_rows(root, pose, layout), np.float64)
     if not np.isfinite(joints).all():
-        raise GenerateError("the generator produced non-finite positions (a broken checkpoint?)")
+        raise limits.GenerateError("the generator produced non-finite positions (a broken checkpoint?)")
     shift = floor_shift(joints)
     joints[..., 1] += shift[:, None, None]
     return Generated(joints, root_vel, pose, curve, w, shift)
@@ -153,7 +151,7 @@ def chunk_starts(T: int, chunk_T: int) -> list[int]:
     if T <= chunk_T:
         return [0]
     if chunk_T % 8 or chunk_T < 2 * CHUNK_OVERLAP:
-        raise GenerateError(f"chunk_T must be a multiple of 8 and >= {2 * CHUNK_OVERLAP}, got {chunk_T}")
+        raise limits.GenerateError(f"chunk_T must be a multiple of 8 and >= {2 * CHUNK_OVERLAP}, got {chunk_T}")
     n = 1 + -(-(T - chunk_T) // (chunk_T - CHUNK_OVERLAP))
     while True:
         starts = [8 * round(i * (T - chunk_T) / (8 * (n - 1))) for i in range(n)]

@@ -26,11 +26,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from motiongan_jax import atomic
-from motiongan_jax.motion import ik
-from motiongan_jax.generate.limits import GenerateError
-from motiongan_jax.generate.walk import Generated
 from motiongan_jax.generate import limits
-
+from motiongan_jax.generate.walk import Generated
+from motiongan_jax.motion import ik
 
 OUTPUT_SUFFIXES = (".bvh", ".npz", ".gif", ".mp4", ".png")
 BVH_UNITS = {"m": 1.0, "cm": 100.0}
@@ -42,34 +40,34 @@ def check_output_path(out, *, count: int = 1) -> list[Path]:
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in OUTPUT_SUFFIXES:
-        raise GenerateError(f"output {out}: unsupported format {out.suffix or '(none)'!r}; use one of "
-                            f"{', '.join(OUTPUT_SUFFIXES)}")
+        raise limits.GenerateError(f"output {out}: unsupported format {out.suffix or '(none)'!r}; use one of "
+                                   f"{', '.join(OUTPUT_SUFFIXES)}")
     parent = out.parent
     if parent.exists() and not parent.is_dir():
-        raise GenerateError(f"cannot write {out}: {parent} is not a directory")
+        raise limits.GenerateError(f"cannot write {out}: {parent} is not a directory")
     if not parent.is_dir():
-        raise GenerateError(f"cannot write {out}: directory {parent} does not exist")
+        raise limits.GenerateError(f"cannot write {out}: directory {parent} does not exist")
     try:  # a real probe: os.access says yes to root even where writing fails (/proc, read-only mounts)
         fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{out.name}.", suffix=".probe")
         os.close(fd)
         os.unlink(probe)
     except OSError as e:
-        raise GenerateError(f"cannot write {out}: directory {parent} is not writable "
-                            f"({e.strerror})") from None
+        raise limits.GenerateError(f"cannot write {out}: directory {parent} is not writable "
+                                   f"({e.strerror})") from None
     paths = [out] if count == 1 or suffix in (".gif", ".mp4", ".png") else \
         [out.with_name(f"{out.stem}_{i}{out.suffix}") for i in range(count)]
     for p in paths:
         if p.is_dir():
-            raise GenerateError(f"cannot write {p}: it is a directory")
+            raise limits.GenerateError(f"cannot write {p}: it is a directory")
         if p.exists() and not os.access(p, os.W_OK):
-            raise GenerateError(f"cannot write {p}: the existing file is read-only")
+            raise limits.GenerateError(f"cannot write {p}: the existing file is read-only")
     if suffix == ".mp4":
         from motiongan_jax import viz
 
         try:
             viz.video_writer(out, 15.0)
         except RuntimeError as e:
-            raise GenerateError(str(e)) from None
+            raise limits.GenerateError(str(e)) from None
     return paths
 
 
@@ -77,15 +75,15 @@ def check_output_size(out, frames: int, count: int = 1) -> None:
     """GenerateError when a .gif of `count` panels x `frames` frames exceeds MAX_GIF_FRAMES
     (Pillow keeps every frame in memory until the file is written; .mp4 streams to ffmpeg)."""
     if Path(out).suffix.lower() == ".gif" and frames * count > limits.MAX_GIF_FRAMES:
-        raise GenerateError(f"output {out}: a GIF of {count} panel(s) x {frames:,} frames is more than "
-                            f"the limit of {limits.MAX_GIF_FRAMES:,} frames x panels (generate.limits.MAX_GIF_FRAMES; "
-                            f"GIF frames are held in memory): write .mp4, .bvh or .npz, or a shorter curve")
+        raise limits.GenerateError(f"output {out}: a GIF of {count} panel(s) x {frames:,} frames is more than "
+                                   f"the limit of {limits.MAX_GIF_FRAMES:,} frames x panels (generate.limits.MAX_GIF_FRAMES; "
+                                   f"GIF frames are held in memory): write .mp4, .bvh or .npz, or a shorter curve")
 
 
 def rest_offsets(layout) -> np.ndarray:
     """The export skeleton's rest offsets: the layout's (every checkpoint stores them)."""
     if layout.rest_offsets_m is None:
-        raise GenerateError("this layout has no rest offsets: a BVH export needs the skeleton's rest pose")
+        raise limits.GenerateError("this layout has no rest offsets: a BVH export needs the skeleton's rest pose")
     return np.asarray(layout.rest_offsets_m, np.float64)
 
 
@@ -95,9 +93,9 @@ def to_bvh_motion(positions_TxJx3, layout, fps: float, units: str = "m", log=Non
     (see ik.py). For "source", `log` gets how far the best-fit bones are off the generated
     directions."""
     if units not in BVH_UNITS:
-        raise GenerateError(f"BVH units must be one of {', '.join(BVH_UNITS)}, got {units!r}")
+        raise limits.GenerateError(f"BVH units must be one of {', '.join(BVH_UNITS)}, got {units!r}")
     if hierarchy not in ik.HIERARCHIES:
-        raise GenerateError(f"BVH hierarchy must be one of {', '.join(ik.HIERARCHIES)}, got {hierarchy!r}")
+        raise limits.GenerateError(f"BVH hierarchy must be one of {', '.join(ik.HIERARCHIES)}, got {hierarchy!r}")
     rest = rest_offsets(layout)
     scale = BVH_UNITS[units]
     motion = ik.positions_to_motion(positions_TxJx3, layout.joint_names, layout.parents, rest,
@@ -175,7 +173,7 @@ def write_outputs(out, gen: Generated, titles: Sequence[str], layout, fps: float
         else:
             viz.pose_strips(list(gen.positions), parents, list(titles), out, curves=[gen.curve] * B)
     except RuntimeError as e:  # e.g. ffmpeg vanished between the check and the write
-        raise GenerateError(str(e)) from None
+        raise limits.GenerateError(str(e)) from None
     except OSError as e:  # the temporary file is gone with the error (atomic writes)
-        raise GenerateError(f"cannot write {out}: {e.strerror or e}") from None
+        raise limits.GenerateError(f"cannot write {out}: {e.strerror or e}") from None
     return paths

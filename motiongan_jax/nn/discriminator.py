@@ -39,7 +39,14 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from motiongan_jax.nn.layers import Conv, Dense, leaky_relu, normal_init, uniform_init, zeros_init
+from motiongan_jax.nn.layers import (
+    Conv,
+    Dense,
+    leaky_relu,
+    normal_init,
+    uniform_init,
+    zeros_init,
+)
 
 PADDED_ROWS = 81
 

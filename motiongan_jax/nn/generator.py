@@ -75,10 +75,18 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from motiongan_jax.data import curves
 from motiongan_jax.config import GFrame, LatentInit, choices
+from motiongan_jax.data import curves
 from motiongan_jax.nn.latent import LatentTransform
-from motiongan_jax.nn.layers import AdaIN, Conv, ConvTranspose, Dense, leaky_relu, upsample_time2, zeros_init
+from motiongan_jax.nn.layers import (
+    AdaIN,
+    Conv,
+    ConvTranspose,
+    Dense,
+    leaky_relu,
+    upsample_time2,
+    zeros_init,
+)
 
 MAX_JOINTS = 27
 

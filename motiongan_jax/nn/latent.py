@@ -21,7 +21,14 @@ import jax.numpy as jnp
 from flax import nnx
 
 from motiongan_jax.config import LatentInit, choices
-from motiongan_jax.nn.layers import Dense, leaky_relu, normal_init, pixel_norm, torch_default_dense, zeros_init
+from motiongan_jax.nn.layers import (
+    Dense,
+    leaky_relu,
+    normal_init,
+    pixel_norm,
+    torch_default_dense,
+    zeros_init,
+)
 
 NUM_LAYERS = 5
 

@@ -4,7 +4,6 @@ analysis, evaluation).
 
 from __future__ import annotations
 
-
 import jax
 import jax.numpy as jnp
 from flax import nnx

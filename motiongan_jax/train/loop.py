@@ -25,10 +25,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from motiongan_jax import atomic
-from motiongan_jax.train import checkpoint, parallel
-from motiongan_jax.data import curves, dataset as data
-from motiongan_jax.train import inference, state as train_state, step as step_lib
 from motiongan_jax.config import Config, config_hash, to_dict
+from motiongan_jax.data import curves
+from motiongan_jax.data import dataset as data
+from motiongan_jax.train import checkpoint, inference, parallel
+from motiongan_jax.train import state as train_state
+from motiongan_jax.train import step as step_lib
 
 
 class NonFiniteError(FloatingPointError):

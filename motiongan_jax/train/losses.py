@@ -21,9 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from motiongan_jax.config import GanLoss, choices
 from motiongan_jax.data import curves
 from motiongan_jax.motion import representation
-from motiongan_jax.config import GanLoss, choices
 
 REAL_TARGET = 0.9  # label smoothing of the reference
 FAKE_TARGET = 0.1

@@ -4,12 +4,11 @@ gait phase.
 
 from __future__ import annotations
 
-
 import jax
 import jax.numpy as jnp
 
-from motiongan_jax.train import losses
 from motiongan_jax.nn import Discriminator
+from motiongan_jax.train import losses
 
 
 def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR,

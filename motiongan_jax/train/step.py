@@ -28,12 +28,17 @@ import numpy as np
 import optax
 from flax import nnx
 
-from motiongan_jax.data import curves
-from motiongan_jax.train import losses
 from motiongan_jax.config import GanLoss, choices
+from motiongan_jax.data import curves
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.nn import SpectralNormState
-from motiongan_jax.train.objectives import d_losses, g_losses, sample_labels_and_z, sample_phase
+from motiongan_jax.train import losses
+from motiongan_jax.train.objectives import (
+    d_losses,
+    g_losses,
+    sample_labels_and_z,
+    sample_phase,
+)
 from motiongan_jax.train.state import TrainState, count_rel_joints, optimizers
 
 

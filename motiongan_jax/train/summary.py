@@ -14,11 +14,12 @@ from __future__ import annotations
 import jax
 from flax import nnx
 
-from motiongan_jax.data import dataset as data, synthetic
-from motiongan_jax.train import state as train_state
-from motiongan_jax.nn import count_params
 from motiongan_jax.config import Config
+from motiongan_jax.data import dataset as data
+from motiongan_jax.data import synthetic
 from motiongan_jax.motion.representation import layout_from_skeleton
+from motiongan_jax.nn import count_params
+from motiongan_jax.train import state as train_state
 
 
 def model_source(cfg: Config):
