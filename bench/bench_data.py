@@ -82,7 +82,8 @@ def bench_batches(repeats: int) -> None:
         times.append(time.perf_counter() - t0)
     med = statistics.median(times)
     print(f"batch of 24 paper-size windows (T 128, fps+rotation aug, noisy curves): median {med * 1e3:.2f} ms "
-          f"over {len(times)} batches (compile {compile_s:.1f} s); reference 580-860 ms -> {0.58 / med:.0f}-{0.86 / med:.0f}x")
+          f"over {len(times)} batches (compile {compile_s:.1f} s); reference 580-860 ms -> "
+          f"{0.58 / med:.0f}-{0.86 / med:.0f}x")
 
 
 def main() -> None:

@@ -68,7 +68,8 @@ def main():
                 jax.block_until_ready(compiled(state, vel, labels))
                 times.append(time.perf_counter() - t0)
             med = statistics.median(times)
-            ref = f"; reference {REFERENCE_S[T] * 1e3:.0f} ms, goal <= {GOAL_S[T] * 1e3:.0f} ms" if T in REFERENCE_S else ""
+            ref = (f"; reference {REFERENCE_S[T] * 1e3:.0f} ms, goal <= {GOAL_S[T] * 1e3:.0f} ms"
+                   if T in REFERENCE_S else "")
             print(f"  [{impl}] G forward T {T:5d} ({T / SAMPLES_PER_S:5.1f} s of walking): median "
                   f"{med * 1e3:7.1f} ms (min {min(times) * 1e3:.1f}, {args.repeats} runs); compile "
                   f"{compile_s:.1f} s; XLA counts {gflop:.1f} GFLOP{ref}   ({load()})", flush=True)

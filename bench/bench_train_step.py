@@ -66,7 +66,8 @@ def fake_batch(B, T, R, num_styles, key):
     """Random batch of the step's shapes, with a gait phase (read by configs with train.w_g_rec)."""
     k1, k2, k3, k4 = jax.random.split(key, 4)
     t = jnp.arange(T, dtype=jnp.float32)[None, :, None]
-    root = jnp.concatenate([0.1 * t, jnp.ones((1, T, 1)), jnp.zeros((1, T, 1))], -1) + 0.01 * jax.random.normal(k1, (B, T, 3))
+    root = (jnp.concatenate([0.1 * t, jnp.ones((1, T, 1)), jnp.zeros((1, T, 1))], -1)
+            + 0.01 * jax.random.normal(k1, (B, T, 3)))
     return {
         "root_BxTx3": root,
         "pose_BxTxR": 0.3 * jax.random.normal(k2, (B, T, R)),

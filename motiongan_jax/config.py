@@ -260,7 +260,8 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
             elif kind is bool:
                 need(isinstance(value, bool), field, f"true or false, got {value!r}")
 
-    need(d.data_dir is None or Path(d.data_dir).is_dir(), "data.data_dir", f"data directory {d.data_dir!r} does not exist")
+    need(d.data_dir is None or Path(d.data_dir).is_dir(), "data.data_dir",
+         f"data directory {d.data_dir!r} does not exist")
     need(d.frame_step >= 1, "data.frame_step", "must be >= 1")
     need(d.frame_nums % d.frame_step == 0, "data.frame_nums", "must be a multiple of data.frame_step")
     need(d.window_T % 8 == 0 and d.window_T >= 16, "data.frame_nums",

@@ -211,7 +211,8 @@ def test_the_demo_limits_lie_inside_generates_which_apply_too(client, monkeypatc
     monkeypatch.setattr(limits, "MAX_CURVE_LENGTH_M", 2.0)
     r = _post(client, "/api/generate", {"points": _line(32), "styles": ["Happy"]})  # 2.5 m
     assert r.status_code == 400, r.get_json()
-    assert re.search(r"3 m is longer than the limit of 2 m \(generate.limits.MAX_CURVE_LENGTH_M\)", r.get_json()["error"])
+    assert re.search(r"3 m is longer than the limit of 2 m \(generate.limits.MAX_CURVE_LENGTH_M\)",
+                     r.get_json()["error"])
 
 
 def test_style_check_and_shapes(client, engine):

@@ -243,8 +243,8 @@ def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
         chex.assert_shape((t.real_heights_Tx2, t.gen_heights_Tx2), (n, 2))
         clip = next(c for c in ds.val if c.source == t.source)
         step = cfg.data.frame_step
-        real = np.asarray(representation.from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
-                                    layout))
+        real = np.asarray(representation.from_rows(clip.root_Fx3[: (n - 1) * step + 1: step],
+                                                   clip.pose_FxR[: (n - 1) * step + 1: step], layout))
         np.testing.assert_allclose(t.real_heights_Tx2, metrics.toe_heights(real[:, list(feet)]), atol=1e-9)
     plot = _load_cli(repo, "plot_gait")
     assert plot(["--workdir", str(tiny_run), "--out", str(tmp_path / "gait.png"), "--seconds", "2"]) == 0

@@ -223,7 +223,8 @@ def test_generator_fast_equals_straightforward(num_joints, T):
 
 
 def test_discriminator_fast_equals_straightforward():
-    fast, plain = _pair(lambda impl: Discriminator(20, num_styles=4, seq_len=16, base_channels=8, impl=impl, rngs=nnx.Rngs(0)))
+    fast, plain = _pair(lambda impl: Discriminator(20, num_styles=4, seq_len=16, base_channels=8, impl=impl,
+                                                   rngs=nnx.Rngs(0)))
     root = jax.random.normal(jax.random.key(1), (2, 16, 3))
     pose = jax.random.normal(jax.random.key(2), (2, 16, 60))
     cot = (jnp.ones(2), jnp.ones((2, 4)))

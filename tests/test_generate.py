@@ -114,7 +114,8 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
     np.testing.assert_allclose(w[0], direct, rtol=1e-6, atol=1e-12)
     # a raw w file, and one of the wrong size (incompatible with this checkpoint)
     np.save(tmp_path / "w.npy", w[1])
-    np.testing.assert_array_equal(styles.spec_codes(state, [styles.parse_style(str(tmp_path / "w.npy"), names)], names)[0], w[1])
+    np.testing.assert_array_equal(
+        styles.spec_codes(state, [styles.parse_style(str(tmp_path / "w.npy"), names)], names)[0], w[1])
     np.savetxt(tmp_path / "bad.txt", np.zeros(styles.w_dim(state) + 3))
     with pytest.raises(styles.StyleError, match=f"has {styles.w_dim(state) + 3} values.*w has {styles.w_dim(state)}"):
         styles.spec_codes(state, [styles.parse_style(str(tmp_path / "bad.txt"), names)], names)
@@ -144,7 +145,8 @@ def test_prepare_curve_spacing_keeps_every_sample():
     c = user_curves.prepare_curve(_line(T_LONG + 5), 15.0, SPEED, log=notes.append)
     assert len(c) == T_LONG + 5 and "101 samples" in notes[-1] and "cropped back to its 101 samples" in notes[-1]
     assert walk.padded_length(101) == 104 and walk.padded_length(96) == 96 and walk.padded_length(3) == walk.MIN_T
-    c = user_curves.prepare_curve(user_curves.Curve(np.array([[0.0, 0.0], [0.5, 0.0]]), "short"), 15.0, SPEED, log=notes.append)
+    c = user_curves.prepare_curve(user_curves.Curve(np.array([[0.0, 0.0], [0.5, 0.0]]), "short"), 15.0, SPEED,
+                                  log=notes.append)
     assert len(c) == 7 and f"at least {walk.MIN_T}" in notes[-1]  # 0.5 m at 8 cm: 0, 0.08, ..., 0.48
     np.testing.assert_allclose(np.diff(c[:, 0]), SPEED / 15, rtol=1e-5)
     c = user_curves.prepare_curve(user_curves.load_curve("circle", scale=1.0), 15.0, 0.6)  # speed sets the spacing
@@ -180,7 +182,8 @@ def test_curve_limits_refuse_before_allocating(tmp_path, monkeypatch):
         user_curves.load_curve(str(tmp_path / "big.csv"))
     assert time.perf_counter() - t0 < 5.0
     # the bounds themselves: a 10-minute walk fits, at the default speed and the shipped 15 Hz
-    assert 10 * 60 * 15 < limits.MAX_CURVE_SAMPLES and 10 * 60 * user_curves.DEFAULT_SPEED_M_PER_S < limits.MAX_CURVE_LENGTH_M
+    assert (10 * 60 * 15 < limits.MAX_CURVE_SAMPLES
+            and 10 * 60 * user_curves.DEFAULT_SPEED_M_PER_S < limits.MAX_CURVE_LENGTH_M)
 
 
 def test_bad_curves_are_clear_errors(tmp_path):
@@ -383,7 +386,8 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     one = walk.generate_motion(state, layout, full[:M], w, phi0)
     assert [c[0].shape for c in calls] == [(2, 1536, 3)]
     calls.clear()
-    ch = walk.generate_motion(state, layout, full[:M], w, phi0, chunk_T=L, progress=lambda d, n: progress.append((d, n)))
+    ch = walk.generate_motion(state, layout, full[:M], w, phi0, chunk_T=L,
+                              progress=lambda d, n: progress.append((d, n)))
     assert [c[0].shape for c in calls] == [(2, L, 3)] * 2 and progress == [(1, 2), (2, 2)]
     chex.assert_shape([one.positions, ch.positions], (2, M, layout.num_joints, 3))
     # the whole curve is walked: padded and cropped = the longer curve's first M frames
@@ -509,8 +513,8 @@ def test_cli_npz_subprocess_then_bvh_round_trip(repo, run_dir, cli, tmp_path, ca
     assert m and int(m.group(1)) == fitted.sum(), note
     assert float(m.group(3)) == pytest.approx(np.degrees(angle[:, fitted].max()), rel=0.05, abs=1e-3)
     np.testing.assert_allclose(representation.bone_lengths(
-        (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout.bone_pairs), np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)),
-        atol=1e-6)
+        (world[:, 1:] - world[:, :1]).reshape(T_LONG, -1), layout.bone_pairs),
+        np.broadcast_to(layout.bone_lengths_m, (T_LONG, J - 1)), atol=1e-6)
     # the exact form: zero-length branch joints, every bone direction exact; it reads back to the layout too
     assert cli([*common, "--out", str(tmp_path / "exact.bvh"), "--bvh-hierarchy", "exact"]) == 0
     exact = bvh.read_bvh(tmp_path / "exact.bvh")
@@ -539,7 +543,8 @@ def test_cli_progress_shows_only_when_generation_is_slow(repo):
 def test_cli_params_choose_the_moving_average_or_the_raw_g(repo, cli, tmp_path):
     cfg = override(load_config(repo / "configs" / "tiny.py"), ["train.g_ema_decay=0.999"])
     wd = _random_run(cfg, tmp_path / "run")  # g_ema_params random too, so unlike g_params
-    common = ["--workdir", str(wd), "--style", "Happy", "--curve", "line", "--length", str((T_LONG - 1) * SPEED / 15 + 1e-6)]
+    common = ["--workdir", str(wd), "--style", "Happy", "--curve", "line", "--length",
+              str((T_LONG - 1) * SPEED / 15 + 1e-6)]
     out = {}
     for name, extra in (("default", []), ("ema", ["--params", "ema"]), ("raw", ["--params", "raw"])):
         assert cli([*common, *extra, "--out", str(tmp_path / f"{name}.npz")]) == 0

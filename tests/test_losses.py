@@ -89,8 +89,8 @@ def test_bone_loss_zero_at_target_lengths_and_hand():
     lengths = np.array([0.1, 0.4, 0.25, 0.3])
     pairs = [(0, 1), (1, 2), (2, 3), (3, 4)]
     pose = _chain_pose(lengths)
-    np.testing.assert_allclose(np.asarray(representation.bone_lengths(pose, pairs)), np.broadcast_to(lengths, (2, 5, 4)),
-                               rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(representation.bone_lengths(pose, pairs)),
+                               np.broadcast_to(lengths, (2, 5, 4)), rtol=1e-5)
     assert float(losses.bone_loss(pose, pairs, lengths, 0.056444)) < 1e-9
     # one bone 0.1 too long everywhere: MSE over 4 bones = 0.01 / 4, in units of 0.05
     target = lengths.copy()

@@ -597,7 +597,8 @@ BAD_INPUTS = [
 ]
 
 
-@pytest.mark.parametrize("call, match", BAD_INPUTS, ids=[m.split(".")[0] + str(i) for i, (_, m) in enumerate(BAD_INPUTS)])
+@pytest.mark.parametrize("call, match", BAD_INPUTS,
+                         ids=[m.split(".")[0] + str(i) for i, (_, m) in enumerate(BAD_INPUTS)])
 def test_bad_inputs_raise(call, match):
     with pytest.raises(ValueError, match=match):
         call()

@@ -96,7 +96,8 @@ def test_two_processes_equal_one_with_two_devices_and_resume_after_sigkill(repo,
     # the reference: one process, two forced CPU devices; the tiny config's 4 steps, checkpoints at 2 and 4
     ref = subprocess.run([sys.executable, str(repo / "bin" / "train.py"), "--config", str(repo / "configs" / "tiny.py"),
                           "--workdir", str(ref_dir), "--no-progress"], capture_output=True, text=True, timeout=1800,
-                         env={**env, "XLA_FLAGS": f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"})
+                         env={**env,
+                              "XLA_FLAGS": f"{env.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2"})
     assert ref.returncode == 0, ref.stderr[-3000:]
     assert "data parallel over 2 devices in 1 process(es)" in ref.stdout
 

@@ -175,7 +175,8 @@ def test_g_adversarial_gradient_fools_a_frozen_d(setup):
         return d(vel, pose, update_stats=False)[0]
 
     def g_step(g_params, opt):
-        loss, grads = jax.value_and_grad(lambda p: jnp.mean(optax.sigmoid_binary_cross_entropy(adv_logits(p), 0.9)))(g_params)
+        loss, grads = jax.value_and_grad(
+            lambda p: jnp.mean(optax.sigmoid_binary_cross_entropy(adv_logits(p), 0.9)))(g_params)
         updates, opt = tx.update(grads, opt, g_params)
         return optax.apply_updates(g_params, updates), opt, loss
 
@@ -227,7 +228,8 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     from motiongan_jax.motion.representation import layout_from_skeleton, rest_positions
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=4, w_dim=8, z_dim=8)))
+    plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
+                                model=ModelConfig(top=4, w_dim=8, z_dim=8)))
     prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior=True))
     # the modules themselves (eager, no compile): same key, same parameters
     rows = train_state.output_prior_rows(prior_cfg.model, layout)
@@ -246,7 +248,8 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     bones = np.linalg.norm(np.diff(rest_positions(layout)[np.asarray(layout.bone_pairs)], axis=1)[:, 0], axis=-1)
     np.testing.assert_allclose(bones, layout.bone_lengths_m, rtol=1e-6)
     with pytest.raises(ValueError, match="output_prior"):
-        validate(dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior="rest_and_curve")))
+        validate(dataclasses.replace(plain_cfg,
+                                     model=dataclasses.replace(plain_cfg.model, output_prior="rest_and_curve")))
 
 
 def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
@@ -372,8 +375,8 @@ def test_gait_phase_by_hand():
     s = 0.1 * np.arange(8)
     for b, (lam, phi0) in enumerate(((0.4, 0.3), (0.8, -1.0))):
         a = phi0 + 2 * np.pi * s / lam
-        np.testing.assert_allclose(np.asarray(out[b]), np.stack([np.sin(a), np.sin(2 * a), np.cos(a), np.cos(2 * a)], -1),
-                                   atol=1e-5)
+        np.testing.assert_allclose(np.asarray(out[b]),
+                                   np.stack([np.sin(a), np.sin(2 * a), np.cos(a), np.cos(2 * a)], -1), atol=1e-5)
     # a quarter circle of radius 2 m in 16 steps: each step is a chord 2·2·sin(π/64) long
     ang = np.linspace(0, np.pi / 2, 17)
     pts = 2.0 * np.stack([np.sin(ang), 0 * ang, 1 - np.cos(ang)], -1)
@@ -413,8 +416,8 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     v1, p1 = g(vel, w, offset)
     v2, p2 = g(curves.rotate_y(vel, 1.1), w, offset)
     np.testing.assert_allclose(np.asarray(v2), np.asarray(curves.rotate_y(v1, 1.1)), atol=2e-5)
-    np.testing.assert_allclose(np.asarray(p2), np.asarray(curves.rotate_y(p1.reshape(B, T, -1, 3), 1.1).reshape(p1.shape)),
-                               atol=2e-5)
+    np.testing.assert_allclose(np.asarray(p2),
+                               np.asarray(curves.rotate_y(p1.reshape(B, T, -1, 3), 1.1).reshape(p1.shape)), atol=2e-5)
     with pytest.raises(ValueError, match="no gait phase"):
         plain(vel, w, offset)
     with pytest.raises(ValueError, match="no gait phase"):

@@ -89,7 +89,8 @@ def test_resume_after_a_half_written_checkpoint_equals_unbroken_and_carries_g_em
     ema = checkpoint.load_run(tmp_path / "unbroken")[0]  # the default for generation and analysis
     for got, want in zip(jax.tree.leaves(ema.g_params), jax.tree.leaves(raw.g_ema_params)):
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
-    assert not np.array_equal(np.asarray(jax.tree.leaves(ema.g_params)[0]), np.asarray(jax.tree.leaves(raw.g_params)[0]))
+    assert not np.array_equal(np.asarray(jax.tree.leaves(ema.g_params)[0]),
+                              np.asarray(jax.tree.leaves(raw.g_params)[0]))
 
 
 def test_sigkill_and_restart_equals_unbroken(unbroken, repo, tmp_path):
@@ -190,8 +191,8 @@ def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
     older = {k: v for k, v in meta["model"].items() if k not in ("g_frame", "exact_bones")}
     checkpoint.check_compatible({"model": older}, {"model": to_dict(tiny)["model"]}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
-        checkpoint.check_compatible({"model": older}, {"model": to_dict(override(tiny, ["model.g_frame=curve"]))["model"]},
-                                    "here")
+        checkpoint.check_compatible({"model": older},
+                                    {"model": to_dict(override(tiny, ["model.g_frame=curve"]))["model"]}, "here")
 
 
 def test_dry_run_prints_parameter_counts(repo, tmp_path):

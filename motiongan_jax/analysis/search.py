@@ -1,4 +1,5 @@
-"""Style search. Recover a code for an unlabelled motion: cut it into the model's windows (analysis.clips), then minimise a reconstruction loss through G over w alone with optax Adam (linear
+"""Style search. Recover a code for an unlabelled motion: cut it into the model's windows
+(analysis.clips), then minimise a reconstruction loss through G over w alone with optax Adam (linear
 warm-up that starts below the peak rate, then cosine decay), from several starts at once, in
 one jitted scan. Unlike the reference there is no D in the loop (its terms were detached there
 and had no effect), motion and curve cover the same frames, and nothing touches the model's

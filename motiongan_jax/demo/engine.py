@@ -225,7 +225,8 @@ class Engine:
             raise RequestError(f"{len(specs)} styles x {len(z)} samples = {len(specs) * len(z)} "
                                f"motions; the demo makes at most {MAX_MOTIONS} at once")
         notes: list[str] = []
-        curve_T = user_curves.prepare_curve(user_curves.Curve(req.points, "path"), self.rate, req.speed, log=notes.append)
+        curve_T = user_curves.prepare_curve(user_curves.Curve(req.points, "path"), self.rate, req.speed,
+                                            log=notes.append)
         T = len(curve_T)
         if T > SAMPLE_BUCKETS[-1]:
             speed = req.speed or user_curves.DEFAULT_SPEED_M_PER_S

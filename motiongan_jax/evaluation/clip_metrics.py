@@ -57,8 +57,8 @@ def gait_traces(state, cfg, layout, val_clips, style_names, feet, sample_rate: f
         curve = np.asarray(mw.curve_NxTx3[0], np.float32)
         z = jax.random.normal(jax.random.fold_in(jax.random.key(seed), c), (1, inference.generator_z_dim(state)))
         gen = walk.generate_motion(state, layout, curve, np.asarray(styles.latent_codes(state, np.array([c]), z)))
-        real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step], clip.pose_FxR[: (n - 1) * step + 1: step],
-                                    layout), np.float64)
+        real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step],
+                                    clip.pose_FxR[: (n - 1) * step + 1: step], layout), np.float64)
         out.append(GaitTrace(name, clip.source, metrics.toe_heights(real[:, list(feet)]),
                              metrics.toe_heights(gen.positions[0][:, list(feet)])))
     return out

@@ -23,9 +23,9 @@ def discriminator_probe(state, batch: dict, key) -> dict:
     turned into a statue gliding along the root (every frame the window's mean pose), smoothed along
     time (no steps: Gaussian over PROBE_SMOOTHING_SAMPLES samples), floating (the root rising
     PROBE_FLOAT_M over the window), and on G's output for their curves and labels (z and the gait
-    phase drawn as in training; G's parameters are the state's). Per input: the mean sigmoid of the real/fake logit, and the share
-    judged real (logit > 0). A D that judges a glide or a float as real as a walk gives G no
-    gradient toward planted feet or the floor."""
+    phase drawn as in training; G's parameters are the state's). Per input: the mean sigmoid of
+    the real/fake logit, and the share judged real (logit > 0). A D that judges a glide or a float
+    as real as a walk gives G no gradient toward planted feet or the floor."""
     root, pose, labels = (np.asarray(batch[k]) for k in ("root_BxTx3", "pose_BxTxR", "label_B"))
     B, T, _ = root.shape
     vel = np.asarray(curves.velocity(jnp.asarray(root)))

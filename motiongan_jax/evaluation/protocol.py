@@ -107,7 +107,8 @@ def _real_block(ctx: Context) -> dict:
     for clip in ctx.val_clips:
         j = np.asarray(from_rows(clip.root_Fx3[::step], clip.pose_FxR[::step], ctx.layout), np.float64)
         if len(j) >= 4:
-            clips[clip.source] = {"style": clip.label.style, **clip_metrics.gait_metrics(j, ctx.feet, ctx.sample_rate, contact)}
+            clips[clip.source] = {"style": clip.label.style,
+                                  **clip_metrics.gait_metrics(j, ctx.feet, ctx.sample_rate, contact)}
     return {"logits": logits, "feats": feats, "labels": labels, "per_window": per, "traj": traj,
             "contact_height_m": contact, "joints": joints, "clips": clips}
 
@@ -138,7 +139,8 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
         clip_feats = feats.reshape(C * s.k, n, -1).mean(1).reshape(C, s.k, -1)
         mm_groups.append(clip_feats)
         for b in range(C * s.k):
-            m = clip_metrics.motion_metrics(gen.positions[b], c.curve_Lx3, ctx.layout, ctx.feet, ctx.sample_rate, contact)
+            m = clip_metrics.motion_metrics(gen.positions[b], c.curve_Lx3, ctx.layout, ctx.feet, ctx.sample_rate,
+                                            contact)
             rows.append({"curve": c.name, "kind": c.kind, "source": c.source, "style": int(labels[b]), **m})
     return {"rows": rows, "logits": np.concatenate(win_logits), "feats": np.concatenate(win_feats),
             "labels": np.concatenate(win_labels), "mm": np.concatenate(mm_groups)}
@@ -150,7 +152,8 @@ def _long_curve_block(ctx: Context, seed: int) -> dict:
     z = jax.random.normal(jax.random.key(20_000 + seed), (C, inference.generator_z_dim(ctx.state)), jnp.float32)
     w = styles.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z)
     gen = walk.generate_motion(ctx.state, ctx.layout, ctx.long_curve.curve_Lx3, np.asarray(w))
-    rows = [clip_metrics.gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m) for b in range(C)]
+    rows = [clip_metrics.gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m)
+            for b in range(C)]
     return {f"long_{k}": _mean_key(rows, k) for k in clip_metrics.GAIT_KEYS}
 
 
@@ -315,13 +318,15 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
         per_seed_style.append(st)
     log("style search on held-out clips")
     search = _search_block(ctx)
-    probe = {} if ctx.probe_batch is None else d_probe.discriminator_probe(ctx.state, ctx.probe_batch, jax.random.key(30_000))
+    probe = ({} if ctx.probe_batch is None
+             else d_probe.discriminator_probe(ctx.state, ctx.probe_batch, jax.random.key(30_000)))
 
     keys = list(per_seed[0])
     generated = {k: _ci([r.get(k, float("nan")) for r in per_seed]) for k in keys}
     per_style = {}
     for name in ctx.style_names:
-        per_style[name] = {"generated": {k: _ci([st[name][k] for st in per_seed_style]) for k in per_seed_style[0][name]},
+        per_style[name] = {"generated": {k: _ci([st[name][k] for st in per_seed_style])
+                                         for k in per_seed_style[0][name]},
                            "real": real_per_style[name]}
     return {
         "generated": generated,
@@ -409,7 +414,8 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
         "evaluator": str(ev_path), "evaluator_checksum": ev.checksum,
         "evaluator_real_heldout": ev.meta.get("real_heldout"), "style_names": list(style_names),
         "settings": dataclasses.asdict(settings), "curve_counts": counts,
-        "curves": [{"name": c.name, "kind": c.kind, "samples": len(c.curve_Lx3), "source": c.source} for c in eval_curves],
+        "curves": [{"name": c.name, "kind": c.kind, "samples": len(c.curve_Lx3), "source": c.source}
+                   for c in eval_curves],
         "train_files": sorted(Path(c.source).name for c in dataset.train),
         "val_files": sorted(Path(c.source).name for c in dataset.val),
         "data_dir": dataset.data_dir, "walking_speed_m_per_s": speed, "sample_rate_hz": rate,

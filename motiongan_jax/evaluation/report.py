@@ -62,10 +62,12 @@ def markdown(report: dict) -> str:
              f"- workdir: `{h['workdir']}`", f"- config hash: `{h['config_hash']}`",
              f"- checkpoint step: {h['checkpoint_step']}, G's parameters: {h.get('g_params', 'raw')}",
              f"- evaluator: `{h['evaluator']}`, checksum `{h['evaluator_checksum']}`",
-             f"- evaluator accuracy on real held-out windows: {_fmt((h.get('evaluator_real_heldout') or {}).get('top1'))} "
+             f"- evaluator accuracy on real held-out windows: "
+             f"{_fmt((h.get('evaluator_real_heldout') or {}).get('top1'))} "
              f"(chance {_fmt(1.0 / len(h['style_names']))})",
              f"- seeds {h['settings']['seeds']}, K = {h['settings']['k']} noise draws per (curve, style), "
-             f"{r['num_generated_clips_per_seed']} generated clips per seed, {r['num_real_windows']} real held-out windows",
+             f"{r['num_generated_clips_per_seed']} generated clips per seed, "
+             f"{r['num_real_windows']} real held-out windows",
              "- curves: " + ", ".join(f"{k} {v}" for k, v in h["curve_counts"].items()),
              f"- files: training {len(h['train_files'])}, held-out {len(h['val_files'])} (lists in report.json)", "",
              "## Metrics (generated: mean ± 95% CI over seeds; real held-out data)", "",
@@ -75,7 +77,8 @@ def markdown(report: dict) -> str:
         real = r["real"].get(key)
         gs = "—" if g is None else f"{_fmt(g['mean'])} ± {_fmt(g['ci95'])}"
         lines.append(f"| {label} | {gs} | {_fmt(real)} |")
-    kinds = sorted(k[len("traj_error_original_m["):-1] for k in r["generated"] if k.startswith("traj_error_original_m["))
+    kinds = sorted(k[len("traj_error_original_m["):-1] for k in r["generated"]
+                   if k.startswith("traj_error_original_m["))
     if kinds:
         lines += ["", "Trajectory error by curve kind (m, generated):", "",
                   "| curve kind | original | symmetric |", "|---|---|---|"]
@@ -85,8 +88,10 @@ def markdown(report: dict) -> str:
     if r.get("search"):
         s = r["search"]
         lines += ["", f"Style search: the recovered w's nearest centroid is the clip's true style for "
-                      f"{_fmt(s['search_recovery'])} of {s['search_clips']} held-out clips (final loss {_fmt(s['search_final_loss'])})."]
-    lines += ["", "## Per style", "", "| style | SRA gen | SRA real | FMD gen | traj. orig. (m) | skate gen | skate real | bone err gen |",
+                      f"{_fmt(s['search_recovery'])} of {s['search_clips']} held-out clips "
+                      f"(final loss {_fmt(s['search_final_loss'])})."]
+    lines += ["", "## Per style", "",
+              "| style | SRA gen | SRA real | FMD gen | traj. orig. (m) | skate gen | skate real | bone err gen |",
               "|---|---|---|---|---|---|---|---|"]
     for name, v in r["per_style"].items():
         g, re_ = v["generated"], v["real"]
@@ -104,7 +109,8 @@ def markdown(report: dict) -> str:
         lines.append(f"| {name} | {_fmt(g['support']['mean'])} | {_fmt(re_['support'])} | "
                      f"{_fmt(g['lower_foot_height_m']['mean'])} | {_fmt(re_['lower_foot_height_m'])} | "
                      f"{_fmt(g['alternation']['mean'])} | {_fmt(re_['alternation'])} | "
-                     f"{_fmt(g['step_frequency_same_curve_hz']['mean'])} | {_fmt(re_['step_frequency_same_curve_hz'])} | "
+                     f"{_fmt(g['step_frequency_same_curve_hz']['mean'])} | "
+                     f"{_fmt(re_['step_frequency_same_curve_hz'])} | "
                      f"{_fmt(g['step_frequency_ratio']['mean'])} |")
     if r.get("discriminator_probe"):
         lines += ["", "The trained D's verdict (mean P(real), share judged real) on real training windows and "

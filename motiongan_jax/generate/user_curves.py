@@ -67,7 +67,8 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
     size = path.stat().st_size
     if size > limits.MAX_CURVE_FILE_BYTES:
         raise limits.GenerateError(f"curve file {path}: {size / 2**20:.0f} MiB is larger than the limit of "
-                                   f"{limits.MAX_CURVE_FILE_BYTES / 2**20:.0f} MiB (generate.limits.MAX_CURVE_FILE_BYTES)")
+                                   f"{limits.MAX_CURVE_FILE_BYTES / 2**20:.0f} MiB "
+                                   f"(generate.limits.MAX_CURVE_FILE_BYTES)")
     if path.suffix.lower() == ".bvh":
         from motiongan_jax.motion import bvh
 
@@ -113,7 +114,8 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
         raise limits.GenerateError(
             f"curve {curve.description}: {expected:,.0f} samples at {spacing:.3g} m ({speed:.3g} m/s at "
             f"{sample_rate:g} Hz) are more than the limit of {limits.MAX_CURVE_SAMPLES:,} "
-            f"({limits.MAX_CURVE_SAMPLES / sample_rate / 60:.0f} minutes at this rate; generate.limits.MAX_CURVE_SAMPLES): "
+            f"({limits.MAX_CURVE_SAMPLES / sample_rate / 60:.0f} minutes at this rate; "
+            f"generate.limits.MAX_CURVE_SAMPLES): "
             f"shorten the curve or walk it faster")
     xz = curves.resample_polyline(curve.points, spacing=spacing, smooth_interval=curve.smooth_interval)
     M = len(xz)

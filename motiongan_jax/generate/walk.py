@@ -110,8 +110,8 @@ def generate_motion(state, layout, curve_Mx3, w_BxD, phase_offset_B=None, *, chu
                                    f"(generate.limits.MAX_CURVE_SAMPLES)")
     if B * M > limits.MAX_TOTAL_SAMPLES:
         raise limits.GenerateError(f"{B} motions x {M:,} samples = {B * M:,} are more than the limit of "
-                                   f"{limits.MAX_TOTAL_SAMPLES:,} (generate.limits.MAX_TOTAL_SAMPLES): ask for fewer styles or "
-                                   f"noise draws at once, or a shorter curve")
+                                   f"{limits.MAX_TOTAL_SAMPLES:,} (generate.limits.MAX_TOTAL_SAMPLES): "
+                                   f"ask for fewer styles or noise draws at once, or a shorter curve")
     if inference.has_gait_phase(state):
         phase = np.zeros(B) if phase_offset_B is None else np.asarray(phase_offset_B, np.float64)
         if phase.shape != (B,) or not np.isfinite(phase).all():

@@ -76,8 +76,9 @@ def check_output_size(out, frames: int, count: int = 1) -> None:
     (Pillow keeps every frame in memory until the file is written; .mp4 streams to ffmpeg)."""
     if Path(out).suffix.lower() == ".gif" and frames * count > limits.MAX_GIF_FRAMES:
         raise limits.GenerateError(f"output {out}: a GIF of {count} panel(s) x {frames:,} frames is more than "
-                                   f"the limit of {limits.MAX_GIF_FRAMES:,} frames x panels (generate.limits.MAX_GIF_FRAMES; "
-                                   f"GIF frames are held in memory): write .mp4, .bvh or .npz, or a shorter curve")
+                                   f"the limit of {limits.MAX_GIF_FRAMES:,} frames x panels "
+                                   f"(generate.limits.MAX_GIF_FRAMES; GIF frames are held in memory): "
+                                   f"write .mp4, .bvh or .npz, or a shorter curve")
 
 
 def rest_offsets(layout) -> np.ndarray:

@@ -222,9 +222,11 @@ def foot_joints(layout) -> tuple[int, int]:
 def joint_side(name: str) -> str | None:
     """'left', 'right' or None from a joint's name (LeftUpLeg, LThumb, UpperLeg_L, l_knee, Foot.R)."""
     n = name.lower()
-    if n.startswith(("left", "l_")) or n.endswith(("_l", ".l")) or (len(name) > 1 and name[0] == "L" and name[1].isupper()):
+    if (n.startswith(("left", "l_")) or n.endswith(("_l", ".l"))
+            or (len(name) > 1 and name[0] == "L" and name[1].isupper())):
         return "left"
-    if n.startswith(("right", "r_")) or n.endswith(("_r", ".r")) or (len(name) > 1 and name[0] == "R" and name[1].isupper()):
+    if (n.startswith(("right", "r_")) or n.endswith(("_r", ".r"))
+            or (len(name) > 1 and name[0] == "R" and name[1].isupper())):
         return "right"
     return None
 

@@ -4,7 +4,8 @@ Layout is NHWC = (B, T, W, C): time is axis 1, the joint-coordinate rows are axi
 Parameters are stored so that they map 1:1 onto the PyTorch reference:
 
 * `Conv.kernel`          (kt, kwidth, in, out)  = torch Conv2d weight (out, in, kt, kwidth).transpose(2, 3, 1, 0)
-* `ConvTranspose.kernel` (kt, kwidth, in, out)  = torch ConvTranspose2d weight (in, out, kt, kwidth).transpose(2, 3, 0, 1)
+* `ConvTranspose.kernel` (kt, kwidth, in, out)  = torch ConvTranspose2d weight (in, out, kt, kwidth)
+                                                  .transpose(2, 3, 0, 1)
 * `Dense.kernel`         (in, out)          = torch weight (out, in).T (1x1 convs included)
 
 Spectral norm is our own (`SpectralNorm`): it keeps the raw weight as the trainable `nnx.Param`

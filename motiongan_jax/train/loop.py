@@ -90,7 +90,8 @@ class Progress:
         eta = (self.total - step) / rate if rate > 0 else float("inf")
         width = 24
         filled = int(width * step / self.total)
-        losses = " ".join(f"{k}={metrics[k]:.3g}" for k in ("d_total", "g_adv", "g_cls", "g_curve", "g_bone") if k in metrics)
+        losses = " ".join(f"{k}={metrics[k]:.3g}" for k in ("d_total", "g_adv", "g_cls", "g_curve", "g_bone")
+                          if k in metrics)
         line = (f"[{'#' * filled}{'.' * (width - filled)}] {step}/{self.total} {rate:.2f} it/s "
                 f"ETA {_hms(eta)} {losses}")
         if self.enabled:

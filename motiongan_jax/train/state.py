@@ -118,7 +118,8 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None
     k_g, k_d = jax.random.split(key)
     kwargs = (("impl", conv_impl(cfg, impl)), ("dtype", compute_dtype(cfg, dtype)))
     g_kwargs = kwargs + (("bones", generator_bones(cfg.model, layout)),)
-    g_def, g_params = init_split(_build_g, (cfg.model, num_rel_joints, num_styles, output_prior_rows(cfg.model, layout)),
+    g_def, g_params = init_split(_build_g,
+                                 (cfg.model, num_rel_joints, num_styles, output_prior_rows(cfg.model, layout)),
                                  k_g, nnx.Param, build_kwargs=g_kwargs)
     d_def, d_params, d_sn = init_split(_build_d, (cfg.model, cfg.data.window_T, num_rel_joints, num_styles),
                                        k_d, nnx.Param, SpectralNormState, build_kwargs=kwargs)

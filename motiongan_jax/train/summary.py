@@ -49,7 +49,8 @@ def model_source(cfg: Config):
 def describe(cfg: Config) -> str:
     layout, style_names, source = model_source(cfg)
     num_styles = len(style_names)
-    g, d = nnx.eval_shape(lambda: train_state.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
+    g, d = nnx.eval_shape(
+        lambda: train_state.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
     lines = [
         f"config {cfg.name}: {source}",
         f"skeleton: {layout.num_joints} kept joints -> {layout.num_rows} rows; window T = {cfg.data.window_T}, "
