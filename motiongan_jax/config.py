@@ -424,7 +424,7 @@ def small() -> Config:
         model=ModelConfig(top=16, kw=5, w_dim=32, z_dim=32, output_prior=True, g_frame="curve",
                           latent_init="torch_default", d_cond=True, exact_bones=True, gait_phase=True,
                           root_height=True),
-        train=TrainConfig(batch_size=16, num_steps=5000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
+        train=TrainConfig(batch_size=16, num_steps=7000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
                           w_g_stride=1.0, w_g_floor=5.0, w_g_skate=5.0, w_g_rec=5.0, w_g_root_jerk=1.0,
                           rec_z="sampled", log_every=50, preview_every=2000, checkpoint_every=1000,
                           keep_checkpoints=10),

@@ -20,7 +20,7 @@ from conftest import assert_bit_identical, load_cli, run_cli
 from motiongan_jax.config import override, to_dict
 from motiongan_jax.data import curves
 from motiongan_jax.data import dataset as data
-from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.train import checkpoint, health, inference
 from motiongan_jax.train import loop as train_lib
 
 
@@ -251,3 +251,36 @@ def test_repeated_set_flags_all_apply(repo, capsys):
     assert "data.frame_nums" in capsys.readouterr().err
     assert cli.main(base + ["--set", "model.top=4", "model.kw=4", "--set", "model.w_dim=8"]) == 2
     assert "model.kw" in capsys.readouterr().err
+
+
+def _log_records(acc_of_step, last=7000, every=50):
+    return [{"step": s, "d_acc_real": acc_of_step(s), "d_acc_fake": acc_of_step(s)}
+            for s in range(every, last + 1, every)]
+
+
+def test_a_late_win_of_d_is_found_in_the_log_and_an_early_one_is_not():
+    # healthy: D's accuracy wanders between 0.5 and 0.7
+    assert health.d_won_since(_log_records(lambda s: 0.5 if s % 100 else 0.7), 7000) is None
+    # D right on every batch from step 5000: the first 500-step window wholly inside ends at 5450
+    # (nine of ten records at 1 give 0.96 < 0.97 before it)
+    assert health.d_won_since(_log_records(lambda s: 1.0 if s >= 5000 else 0.6), 7000) == (5450, 1.0)
+    assert health.last_checkpoint_before(5450 - health.WINDOW_STEPS, range(1000, 7001, 1000)) == 4000
+    assert health.last_checkpoint_before(500, range(1000, 7001, 1000)) is None
+    # D winning the warm-up (the first 20 %, 1400 steps) and a little past it is no upset:
+    # the first window counted, (1400, 1900], has six records at 1 and four at 0.6 (mean 0.84)
+    assert health.d_won_since(_log_records(lambda s: 1.0 if s <= 1700 else 0.6), 7000) is None
+    # fewer than three records in a window are never enough
+    assert health.d_won_since(_log_records(lambda s: 1.0, every=250), 7000) is None
+
+
+def test_the_loop_warns_once_and_names_the_checkpoint_before_d_won(tiny, tmp_path, monkeypatch):
+    # windows of 3 steps after a warm-up of 3 (of 6) and any accuracy counts: the first window
+    # checked, (3, 6], ends at the last checkpoint; the last checkpoint before step 3 is step 2
+    monkeypatch.setattr(health, "WINDOW_STEPS", 3)
+    monkeypatch.setattr(health, "WARMUP_FRACTION", 0.5)
+    monkeypatch.setattr(health, "ACCURACY", 0.0)
+    lines = []
+    cfg = override(tiny, ["train.num_steps=6", "train.keep_checkpoints=3"])
+    train_lib.train(cfg, tmp_path, progress=False, log=lines.append)
+    warnings = [x for x in lines if x.startswith("warning: D has won")]
+    assert len(warnings) == 1 and "over steps 3-6" in warnings[0] and "step 2 (--step 2)" in warnings[0], warnings

@@ -28,7 +28,7 @@ from motiongan_jax import atomic
 from motiongan_jax.config import Config, config_hash, to_dict
 from motiongan_jax.data import curves
 from motiongan_jax.data import dataset as data
-from motiongan_jax.train import checkpoint, inference, parallel
+from motiongan_jax.train import checkpoint, health, inference, parallel
 from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
@@ -207,6 +207,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     bar = Progress(total, start, progress)
     last: dict = {}
     pending = None  # (step, metrics) of the previous step, checked one step late to keep dispatch async
+    warned = False  # D's late win is reported once per call
     for s in range(start, total):
         batch = sample_batch(arrays, k_data, s)
         if parallel_run:
@@ -220,12 +221,32 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
             last = _check_and_log(pending, workdir, cfg, bar, primary, force=done == total)
             pending = None
             checkpoint.save(mngr, done, state, meta)  # every process: orbax writes it together
+            if primary and not warned:
+                warned = _warn_if_d_won(workdir, total, mngr.all_steps(), log)
         if primary and cfg.train.preview_every and done % cfg.train.preview_every == 0:
             write_preview(workdir / "previews" / f"step_{done:07d}.gif", parallel.local_copy(state),
                           dataset.layout, dataset.style_names, preview)
     if pending is not None:
         last = _check_and_log(pending, workdir, cfg, bar, primary, force=True)
     return last
+
+
+def _warn_if_d_won(workdir: Path, total: int, checkpoint_steps, log) -> bool:
+    """Log a warning when metrics.jsonl shows that D has won (health.py); True if it did."""
+    path = workdir / "metrics.jsonl"
+    if not path.exists():
+        return False
+    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    won = health.d_won_since(records, total)
+    if won is None:
+        return False
+    step, acc = won
+    before = health.last_checkpoint_before(step - health.WINDOW_STEPS, checkpoint_steps)
+    log(f"warning: D has won: it judged {acc:.0%} of the logged real and fake windows right over steps "
+        f"{step - health.WINDOW_STEPS}-{step}; G's later checkpoints may have lost the walk; "
+        + (f"the last checkpoint before it is step {before} (--step {before})" if before is not None
+           else "no kept checkpoint is older"))
+    return True
 
 
 def _check_and_log(pending, workdir: Path, cfg: Config, bar: Progress, primary: bool, force: bool = False) -> dict:
