@@ -1,9 +1,9 @@
 """Has D won? A late upset read from the training log alone, without any evaluator.
 
 A run that walks can fall over late: D starts to tell every fake window from every real one, G's
-adversarial loss jumps and its walk degrades (docs/RESULTS.md §16). The log shows it plainly: D's
-batch accuracies on real and fake windows, which wander around 0.4-0.9 in a healthy run once the
-first steps are past, sit at 1 for hundreds of steps. `d_won_since` finds the first such span; the
+adversarial loss jumps and its walk degrades (docs/RESULTS.md §14, §16). The log shows it plainly:
+D's batch accuracies on real and fake windows, well short of 1 in a healthy run once the first
+steps are past, sit at 1 for hundreds of steps. `d_won_since` finds the first such span; the
 training loop warns when it sees one and names the last checkpoint before it.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 WINDOW_STEPS = 500  # long enough that one lucky batch is no upset, short enough to flag it within a checkpoint
-ACCURACY = 0.97  # D's mean accuracy (real and fake) over the window; healthy runs peaked at 0.80-0.90
+ACCURACY = 0.97  # D's mean accuracy (real and fake) over the window: right on nearly every batch
 WARMUP_FRACTION = 0.2  # D wins the first steps of every run, while G has not learnt to walk yet
 
 
