@@ -258,29 +258,46 @@ def _log_records(acc_of_step, last=7000, every=50):
             for s in range(every, last + 1, every)]
 
 
-def test_a_late_win_of_d_is_found_in_the_log_and_an_early_one_is_not():
+def test_upsets_are_found_in_the_log_and_the_runs_model_is_the_checkpoint_clear_of_them():
     # healthy: D's accuracy wanders between 0.5 and 0.7
-    assert health.d_won_since(_log_records(lambda s: 0.5 if s % 100 else 0.7), 7000) is None
-    # D right on every batch from step 5000: the first 500-step window wholly inside ends at 5450
-    # (nine of ten records at 1 give 0.96 < 0.97 before it)
-    assert health.d_won_since(_log_records(lambda s: 1.0 if s >= 5000 else 0.6), 7000) == (5450, 1.0)
-    assert health.last_checkpoint_before(5450 - health.WINDOW_STEPS, range(1000, 7001, 1000)) == 4000
-    assert health.last_checkpoint_before(500, range(1000, 7001, 1000)) is None
-    # D winning the warm-up (the first 20 %, 1400 steps) and a little past it is no upset:
-    # the first window counted, (1400, 1900], has six records at 1 and four at 0.6 (mean 0.84)
-    assert health.d_won_since(_log_records(lambda s: 1.0 if s <= 1700 else 0.6), 7000) is None
-    # fewer than three records in a window are never enough
-    assert health.d_won_since(_log_records(lambda s: 1.0, every=250), 7000) is None
+    assert health.upset_steps(_log_records(lambda s: 0.5 if s % 100 else 0.7), 7000) == []
+    # D right on every batch from step 6900: the 150-step windows ending at 6900 and 6950 hold
+    # 0.6, 0.6, 1 (0.73) and 0.6, 1, 1 (0.87); only the one ending at 7000 reaches 0.9
+    late = health.upset_steps(_log_records(lambda s: 1.0 if s >= 6900 else 0.6), 7000)
+    assert late == [7000]
+    # G's moving average (decay 0.999) remembers 1000 steps: checkpoint 7000 holds the upset, 6000 not
+    assert health.memory_steps(0.999) == 1000 and health.memory_steps(0.0) == health.WINDOW_STEPS
+    assert health.model_step(range(1000, 7001, 1000), late, 1000) == 6000
+    # an upset over steps 7450-7850 of 8000, over by the last checkpoint, is still in its memory
+    spell = health.upset_steps(_log_records(lambda s: 1.0 if 7350 <= s <= 7850 else 0.6, last=8000), 8000)
+    assert spell == list(range(7450, 7851, 50))  # (7250, 7400] holds 0.6, 1, 1; (7750, 7900] 1, 1, 0.6
+    assert health.model_step(range(1000, 8001, 1000), spell, 1000) == 7000
+    assert health.model_step([8000], spell, 1000) is None
+    # D winning the warm-up (the first 30 %, 2100 steps) is no upset: the first window counted,
+    # (1950, 2100], holds 1, 0.6, 0.6
+    assert health.upset_steps(_log_records(lambda s: 1.0 if s <= 2000 else 0.6), 7000) == []
+    # fewer than three records in a window are never enough, nor a window longer than the run
+    assert health.upset_steps(_log_records(lambda s: 1.0, every=100), 7000) == []
+    assert health.upset_steps(_log_records(lambda s: 1.0, last=100, every=1), 100) == []
 
 
-def test_the_loop_warns_once_and_names_the_checkpoint_before_d_won(tiny, tmp_path, monkeypatch):
-    # windows of 3 steps after a warm-up of 3 (of 6) and any accuracy counts: the first window
-    # checked, (3, 6], ends at the last checkpoint; the last checkpoint before step 3 is step 2
+def test_the_loop_warns_of_an_upset_and_generation_uses_the_checkpoint_before_it(tiny, tmp_path, monkeypatch,
+                                                                               caplog):
+    # windows of 3 steps after a warm-up of 3 (of 6) and any accuracy counts: steps 4, 5 and 6 are
+    # upsets; without a moving average G remembers 3 steps, so only checkpoint 2 is clear of them
     monkeypatch.setattr(health, "WINDOW_STEPS", 3)
     monkeypatch.setattr(health, "WARMUP_FRACTION", 0.5)
     monkeypatch.setattr(health, "ACCURACY", 0.0)
     lines = []
     cfg = override(tiny, ["train.num_steps=6", "train.keep_checkpoints=3"])
+    assert cfg.train.g_ema_decay == 0.0
     train_lib.train(cfg, tmp_path, progress=False, log=lines.append)
-    warnings = [x for x in lines if x.startswith("warning: D has won")]
-    assert len(warnings) == 1 and "over steps 3-6" in warnings[0] and "step 2 (--step 2)" in warnings[0], warnings
+    warnings = [x for x in lines if x.startswith("warning: D upset the run")]
+    assert len(warnings) == 1 and "up to step 4;" in warnings[0] and "checkpoint 4 remembers" in warnings[0] \
+        and "model is now checkpoint 2" in warnings[0], warnings
+    assert checkpoint.resolve_step(tmp_path) == 2 and "--step 6 to use it" in caplog.text
+    assert checkpoint.resolve_step(tmp_path, 6) == 6
+    assert int(checkpoint.load_run(tmp_path)[0].step) == 2
+    # without the log there is nothing to go by: the latest checkpoint
+    (tmp_path / "metrics.jsonl").unlink()
+    assert checkpoint.resolve_step(tmp_path) == 6

@@ -17,6 +17,7 @@ def add_model_arguments(ap) -> None:
 
 def add_checkpoint_arguments(ap) -> None:
     """--step and --params: which of a run's checkpoints, and which of G's parameters in it."""
-    ap.add_argument("--step", type=int, default=None, help="checkpoint step (default: the latest)")
+    ap.add_argument("--step", type=int, default=None,
+                    help="checkpoint step (default: the run's model, the latest clear of an upset of D)")
     ap.add_argument("--params", choices=("ema", "raw"), default="ema",
                     help="G's parameters: ema (default; the moving average when the run keeps one) or raw")

@@ -4,9 +4,9 @@
 """
 
 import argparse
-import json
 import sys
-from pathlib import Path
+
+from motiongan_jax.train import health
 
 KEYS = ("d_total", "g_adv", "g_cls", "g_curve", "g_bone", "d_cls_acc_real", "g_cls_acc_fake")
 
@@ -17,11 +17,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--every", type=int, default=500, help="table rows every N steps (mean of the last N)")
     args = ap.parse_args(argv)
-    path = Path(args.workdir) / "metrics.jsonl"
-    if not path.is_file():
-        print(f"error: no metrics.jsonl in {args.workdir}", file=sys.stderr)
+    records = health.read_log(args.workdir)
+    if not records:
+        print(f"error: no metrics.jsonl records in {args.workdir}", file=sys.stderr)
         return 2
-    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     from motiongan_jax import viz
 
     viz.plot_metrics(records, args.out, keys=KEYS, title=str(args.workdir))

@@ -164,7 +164,7 @@ def main(argv=None) -> int:
     src = ap.add_mutually_exclusive_group()
     src.add_argument("--workdir", default=None, help="a training run's directory (default: the shipped model)")
     src.add_argument("--model", default=None, help="an export file (bin/export_model.py)")
-    ap.add_argument("--step", type=int, default=None, help="with --workdir: checkpoint step (default latest)")
+    ap.add_argument("--step", type=int, default=None, help="with --workdir: checkpoint step (default: the run's model)")
     ap.add_argument("--params", choices=("ema", "raw"), default="ema", help="with --workdir: G's parameters")
     ap.add_argument("--host", default="127.0.0.1",
                     help="address to listen on (default 127.0.0.1: this machine only)")

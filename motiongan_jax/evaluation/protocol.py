@@ -360,8 +360,8 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
     `cmu_curves`, the synthetic `shapes`) and evaluates. Returns the report {"header", "results"}
     and the context (for `write_report`). Raises ConfigError, DataError, BVHError,
     CheckpointError, EvaluatorError, EvaluationError or GenerateError naming the problem."""
-    state, meta, cfg, layout = checkpoint.load_run(workdir, step, params)
-    ckpt_step, _ = checkpoint.read_meta(checkpoint.manager(Path(workdir) / "checkpoints"), step)
+    ckpt_step = checkpoint.resolve_step(workdir, step)
+    state, meta, cfg, layout = checkpoint.load_run(workdir, ckpt_step, params)
     if data_dir is not None:
         cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=data_dir))
     ev_path = Path(evaluator_path) if evaluator_path else Path(workdir) / "evaluator.npz"

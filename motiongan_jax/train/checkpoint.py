@@ -10,6 +10,7 @@ checkpoint that `latest_step` would pick up.
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import jax
@@ -17,6 +18,9 @@ import numpy as np
 import orbax.checkpoint as ocp
 
 from motiongan_jax.config import from_dict
+from motiongan_jax.train import health
+
+_log = logging.getLogger(__name__)
 
 
 class CheckpointError(RuntimeError):
@@ -80,17 +84,44 @@ def _jsonable(x):
     return json.loads(json.dumps(x, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))
 
 
-def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
-    """(state, meta, cfg, layout) of a training run's checkpoint, without its data. `params`:
-    "ema" (default) puts G's moving average in `state.g_params` when the run keeps one
-    (train.g_ema_decay > 0), "raw" leaves the trained parameters (train.state.inference_state)."""
-    from motiongan_jax.train import state as train_state
-
+def run_manager(workdir: str | Path) -> ocp.CheckpointManager:
     ckdir = Path(workdir) / "checkpoints"
     if not ckdir.is_dir():
         raise CheckpointError(f"no checkpoints in {workdir} (expected {ckdir})")
-    mngr = manager(ckdir)
-    step, meta = read_meta(mngr, step)
+    return manager(ckdir)
+
+
+def resolve_step(workdir: str | Path, step: int | None = None) -> int:
+    """`step`, or by default the run's model: the latest checkpoint with no upset of D in the
+    steps its G remembers (health.py, from metrics.jsonl). The latest checkpoint when the run has
+    no log or every checkpoint follows an upset; a warning says when it is not the latest."""
+    mngr = run_manager(workdir)
+    latest, meta = read_meta(mngr, step)
+    if step is not None:
+        return latest
+    train = from_dict(meta["config"]).train
+    upsets = health.upset_steps(health.read_log(workdir), train.num_steps)
+    memory = health.memory_steps(train.g_ema_decay)
+    chosen = health.model_step(mngr.all_steps(), upsets, memory)
+    recent = [u for u in upsets if latest - memory < u <= latest]
+    if chosen is None and recent:
+        _log.warning(f"every checkpoint in {workdir} follows an upset of D (health.py); using the latest, {latest}")
+    elif chosen is not None and chosen != latest:
+        _log.warning(f"using checkpoint {chosen} of {workdir}: D upset the run at steps {recent[0]}-{recent[-1]}, "
+                     f"which checkpoint {latest} remembers (health.py); --step {latest} to use it")
+        return chosen
+    return latest
+
+
+def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
+    """(state, meta, cfg, layout) of a training run's checkpoint, without its data: `step`, or by
+    default the run's model (`resolve_step`). `params`: "ema" (default) puts G's moving average
+    in `state.g_params` when the run keeps one (train.g_ema_decay > 0), "raw" leaves the trained
+    parameters (train.state.inference_state)."""
+    from motiongan_jax.train import state as train_state
+
+    mngr = run_manager(workdir)
+    step, meta = read_meta(mngr, resolve_step(workdir, step))
     cfg, layout, like = abstract_model(meta)
     state = restore(mngr, step, like)
     return train_state.inference_state(state, params), meta, cfg, layout

@@ -207,7 +207,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     bar = Progress(total, start, progress)
     last: dict = {}
     pending = None  # (step, metrics) of the previous step, checked one step late to keep dispatch async
-    warned = False  # D's late win is reported once per call
+    warned = False  # an upset is reported once per call
     for s in range(start, total):
         batch = sample_batch(arrays, k_data, s)
         if parallel_run:
@@ -222,7 +222,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
             pending = None
             checkpoint.save(mngr, done, state, meta)  # every process: orbax writes it together
             if primary and not warned:
-                warned = _warn_if_d_won(workdir, total, mngr.all_steps(), log)
+                warned = _warn_if_upset(workdir, cfg, mngr.all_steps(), log)
         if primary and cfg.train.preview_every and done % cfg.train.preview_every == 0:
             write_preview(workdir / "previews" / f"step_{done:07d}.gif", parallel.local_copy(state),
                           dataset.layout, dataset.style_names, preview)
@@ -231,21 +231,22 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
     return last
 
 
-def _warn_if_d_won(workdir: Path, total: int, checkpoint_steps, log) -> bool:
-    """Log a warning when metrics.jsonl shows that D has won (health.py); True if it did."""
-    path = workdir / "metrics.jsonl"
-    if not path.exists():
+def _warn_if_upset(workdir: Path, cfg: Config, checkpoint_steps, log) -> bool:
+    """Log a warning when the newest checkpoint follows an upset of D (health.py), naming the
+    checkpoint that generation, evaluation and export now use; True if it did."""
+    upsets = health.upset_steps(health.read_log(workdir), cfg.train.num_steps)
+    memory = health.memory_steps(cfg.train.g_ema_decay)
+    newest = max(checkpoint_steps)
+    recent = [u for u in upsets if newest - memory < u <= newest]
+    if not recent:
         return False
-    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
-    won = health.d_won_since(records, total)
-    if won is None:
-        return False
-    step, acc = won
-    before = health.last_checkpoint_before(step - health.WINDOW_STEPS, checkpoint_steps)
-    log(f"warning: D has won: it judged {acc:.0%} of the logged real and fake windows right over steps "
-        f"{step - health.WINDOW_STEPS}-{step}; G's later checkpoints may have lost the walk; "
-        + (f"the last checkpoint before it is step {before} (--step {before})" if before is not None
-           else "no kept checkpoint is older"))
+    chosen = health.model_step(checkpoint_steps, upsets, memory)
+    log(f"warning: D upset the run: it judged at least {health.ACCURACY:.0%} of the logged real and fake "
+        f"windows right over the {health.WINDOW_STEPS} steps up to step {recent[0]}"
+        + (f" (and up to {recent[-1]})" if len(recent) > 1 else "")
+        + f"; G's checkpoint {newest} remembers it; "
+        + (f"the run's model is now checkpoint {chosen} (generation, evaluation and export use it unless "
+           f"given --step)" if chosen is not None else "no kept checkpoint is clear of it"))
     return True
 
 

@@ -141,7 +141,8 @@ def export_state(out, state, meta: dict, *, params: str) -> dict:
 
 
 def export_run(workdir, out, *, step: int | None = None, params: str = "ema") -> dict:
-    """The export of a training run's checkpoint (the latest unless `step`); its provenance.
+    """The export of a training run's checkpoint (`step`, or the run's model:
+    checkpoint.resolve_step); its provenance.
     params "ema" exports G's moving average when the run keeps one (else the trained
     parameters, and the provenance says "raw"), "raw" the trained parameters."""
     state, meta, _, _ = checkpoint.load_run(workdir, step, params)
@@ -255,9 +256,6 @@ def model_meta(workdir=None, step: int | None = None, model=None) -> dict:
     """The meta (style names, skeleton, config) of what load_model would load, without the weights
     of a run's checkpoint."""
     if workdir is not None:
-        ckdir = Path(workdir) / "checkpoints"
-        if not ckdir.is_dir():
-            raise checkpoint.CheckpointError(f"no checkpoints in {workdir} (expected {ckdir})")
-        return checkpoint.read_meta(checkpoint.manager(ckdir), step)[1]
+        return checkpoint.read_meta(checkpoint.run_manager(workdir), step)[1]
     return read_export(SHIPPED_MODEL if model is None else model).meta
 
