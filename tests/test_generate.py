@@ -316,7 +316,7 @@ def gait_model(repo):
                     "model.root_height=true"])
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     state = train_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
-    from motiongan_jax.nn.generator import STRIDE_GAIN
+    from motiongan_jax.nn.walker import STRIDE_GAIN
 
     g = inference.generator(state)
     w = styles.spec_codes(state, [styles.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)

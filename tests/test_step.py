@@ -339,7 +339,7 @@ def test_projection_d_judges_each_window_as_its_label():
 def test_project_bones_by_hand_and_identity_on_valid_poses():
     from motiongan_jax.data import synthetic
     from motiongan_jax.motion.representation import layout_from_skeleton, rest_positions
-    from motiongan_jax.nn.generator import project_bones
+    from motiongan_jax.nn.walker import project_bones
 
     # root -> 1 (length 2) -> 2 (length 1); raw rows r1 = (0, 3, 4), r2 = r1 + (5, 0, 0)
     raw = jnp.array([[[0.0, 3.0, 4.0, 5.0, 3.0, 4.0]]])
@@ -367,7 +367,7 @@ def test_gait_phase_by_hand():
     """φ[t] = φ0 + 2π s[t] / λ with s[t] the horizontal distance walked to sample t (v[0] is not
     walked, as in curves.integrate); the vertical component does not count, and a turning path
     counts its arc length. Channels: sin φ, sin 2φ, cos φ, cos 2φ."""
-    from motiongan_jax.nn.generator import gait_phase, walked_phase
+    from motiongan_jax.nn.walker import gait_phase, walked_phase
 
     vel = jnp.tile(jnp.array([0.1, 5.0, 0.0]), (2, 8, 1))  # 0.1 m per sample along x; y ignored
     out = gait_phase(walked_phase(vel, jnp.array([0.4, 0.8]), jnp.array([0.3, -1.0])))
@@ -391,7 +391,7 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     motion, None means 0, a G without the phase refuses offsets; the stride is exp of the head
     (1 m at init); G stays exactly rotation-equivariant in the curve frame."""
     from motiongan_jax.data import curves
-    from motiongan_jax.nn.generator import PHASE_CHANNELS
+    from motiongan_jax.nn.walker import PHASE_CHANNELS
 
     base = ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True, g_frame="curve")
     plain = train_state._build_g(base, J, C, None, jax.random.key(3))
@@ -475,7 +475,7 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
     assert float(jnp.abs(state.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :] - k0).min()) > 0  # phase weights train
     # only the stride term reaches the stride head (G's phase sees a stop-gradient stride), so its
     # gradient is that of mean((log λ - log target)²) by hand, and Adam's first step is -lr·sign(g)
-    from motiongan_jax.nn.generator import STRIDE_GAIN
+    from motiongan_jax.nn.walker import STRIDE_GAIN
 
     labels, z = objectives.sample_labels_and_z(cfg, C, B, jax.random.key(1))
     g0 = inference.generator(state0)

@@ -189,7 +189,7 @@ def _g_outputs(state, vel_Tx3, w_BxD: np.ndarray, phase_B: np.ndarray | None, ch
     weights = chunk_weights(starts, L)
     group = min(B, max(1, BATCH_SAMPLES // L))
     if phase_B is not None and len(starts) > 1:
-        # G's phase is a clock in walked distance from its first sample (nn.generator.walked_phase:
+        # G's phase is a clock in walked distance from its first sample (nn.walker.walked_phase:
         # the first velocity is not walked): a chunk starting at s starts at the phase walked by s
         step_T = np.linalg.norm(np.asarray(vel_Tx3, np.float64)[:, ::2], axis=-1)
         walked_T = np.cumsum(np.concatenate([[0.0], step_T[1:]]))

@@ -1,4 +1,5 @@
-"""Networks (Flax NNX, NHWC = (B, T, W, C)): G with its Latent Transform, and D."""
+"""Networks (Flax NNX, NHWC = (B, T, W, C)): the paper's G with its Latent Transform and the
+small configs' walker around it; the paper's D and its projection variant."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ from typing import Callable
 import jax
 from flax import nnx
 
-from motiongan_jax.nn.discriminator import Discriminator
+from motiongan_jax.nn.discriminator import Discriminator, ProjectionDiscriminator
 from motiongan_jax.nn.generator import Generator
 from motiongan_jax.nn.latent import LatentTransform
 from motiongan_jax.nn.layers import SpectralNormState
+from motiongan_jax.nn.walker import WalkerGenerator
 
 
 def count_params(module: nnx.Module) -> int:
@@ -56,5 +58,5 @@ def init_split(build: Callable[..., nnx.Module], build_args: tuple, key: jax.Arr
     return (graphdef, *compiled(key))
 
 
-__all__ = ["Discriminator", "Generator", "LatentTransform", "SpectralNormState",
-           "count_params", "init_split"]
+__all__ = ["Discriminator", "Generator", "LatentTransform", "ProjectionDiscriminator", "SpectralNormState",
+           "WalkerGenerator", "count_params", "init_split"]

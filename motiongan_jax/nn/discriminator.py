@@ -20,11 +20,11 @@ strides keep the paper's grouping of joints; the parameter count does not depend
 Spectral norm: each call with `update_stats=True` runs one power iteration per layer and stores
 u, v (the reference calls D three times per training iteration, in train mode).
 
-Projection (`projection=True`, model.d_cond, small configs; off in the paper's D): the real/fake
-logit gains <V[y], flat>, V a spectral-norm linear map from the flattened features to one row per
-style (Miyato & Koyama 2018), y the window's label: the real label for real windows, the
-requested one for fakes. The class head still classifies; the verdict now asks "a real walk of
-style y?", which a neighbouring style's posture should fail. Built after the paper's
+`ProjectionDiscriminator` (model.d_cond, small configs) is the paper's D with one more head: the
+real/fake logit gains <V[y], flat>, V a spectral-norm linear map from the flattened features to
+one row per style (Miyato & Koyama 2018), y the window's label: the real label for real windows,
+the requested one for fakes. The class head still classifies; the verdict now asks "a real walk
+of style y?", which a neighbouring style's posture should fail. V is built after the paper's
 layers, so their initial values do not change.
 
 `impl`: "fast" (default) or "xla", the convolution schedule of `conv.conv2d`; same results.
@@ -57,6 +57,8 @@ def flatten_channel_major(x_BxTx1xC: jax.Array) -> jax.Array:
 
 
 class Discriminator(nnx.Module):
+    """The paper's D."""
+
     def __init__(
         self,
         num_rel_joints: int = 27,
@@ -68,10 +70,8 @@ class Discriminator(nnx.Module):
         length_unit: float = 1.0,
         impl: str = "fast",
         compute_dtype: str = "float32",
-        projection: bool = False,
         rngs: nnx.Rngs,
     ):
-        self.projection = bool(projection)
         if not 1 <= num_rel_joints <= PADDED_ROWS // 3:
             raise ValueError(f"num_rel_joints must be in 1..{PADDED_ROWS // 3}, got {num_rel_joints}")
         if seq_len % 16:
@@ -90,7 +90,7 @@ class Discriminator(nnx.Module):
         self.c1_0 = sn_conv(c, 2 * c)
         self.c2_0 = sn_conv(2 * c, 4 * c)
         self.c3_0 = sn_conv(4 * c, 8 * c)
-        feat = 8 * c * (seq_len // 16)
+        feat = self.num_features = 8 * c * (seq_len // 16)
         bound = 1.0 / math.sqrt(feat)
 
         def sn_linear(out):
@@ -99,9 +99,6 @@ class Discriminator(nnx.Module):
 
         self.l_last = sn_linear(1)
         self.l_cls = sn_linear(num_styles)
-        # a zero bias: the verdict starts without a per-style offset (it may learn one)
-        self.l_proj = (Dense(feat, num_styles, kernel_init=normal_init(0.02), bias_init=zeros_init,
-                             spectral_norm=True, rngs=rngs) if self.projection else None)
 
     def _input(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
         b, t, r = pose_BxTxR.shape
@@ -122,21 +119,42 @@ class Discriminator(nnx.Module):
             x = leaky_relu(self.c0_0(x, update_stats=update_stats))
             return leaky_relu(self.c1_0(x, update_stats=update_stats))
 
-    def __call__(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
-                 update_stats: bool, labels_B: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
-        """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business.
-        `labels_B` (int): the style each window is judged as; required by a projection D, ignored
-        by the paper's."""
-        if self.projection and labels_B is None:
-            raise ValueError("a projection D (model.d_cond) needs labels_B")
+    def flat(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *, update_stats: bool) -> jax.Array:
+        """The flattened activations after c3_0 that the heads read, B x (8top·T/16), float32."""
         x = self.features(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
         with jax.named_scope("D"):
             x = leaky_relu(self.c2_0(x, update_stats=update_stats))
             x = leaky_relu(self.c3_0(x, update_stats=update_stats))  # B x T/16 x 1 x 8top
-            flat = flatten_channel_major(x).astype(jnp.float32)
+            return flatten_channel_major(x).astype(jnp.float32)
+
+    def __call__(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
+                 update_stats: bool, labels_B: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        """(real/fake logit B, style logits B x C); sigmoid/softmax are the losses' business.
+        `labels_B`, the style each window is judged as, is ignored by the paper's D (a
+        ProjectionDiscriminator needs it)."""
+        flat = self.flat(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
+        with jax.named_scope("D"):
+            return self.l_last(flat, update_stats=update_stats)[:, 0], self.l_cls(flat, update_stats=update_stats)
+
+
+class ProjectionDiscriminator(Discriminator):
+    """The paper's D with a projection head V (the module docstring): the verdict on a window
+    asks whether it is a real walk of the style it is judged as."""
+
+    def __init__(self, num_rel_joints: int = 27, *, num_styles: int, rngs: nnx.Rngs, **paper):
+        super().__init__(num_rel_joints, num_styles=num_styles, rngs=rngs, **paper)
+        # a zero bias: the verdict starts without a per-style offset (it may learn one)
+        self.l_proj = Dense(self.num_features, num_styles, kernel_init=normal_init(0.02), bias_init=zeros_init,
+                            spectral_norm=True, rngs=rngs)
+
+    def __call__(self, root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, *,
+                 update_stats: bool, labels_B: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        if labels_B is None:
+            raise ValueError("a projection D (model.d_cond) needs labels_B")
+        flat = self.flat(root_vel_BxTx3, pose_BxTxR, update_stats=update_stats)
+        with jax.named_scope("D"):
             adv_B = self.l_last(flat, update_stats=update_stats)[:, 0]
             cls_BxC = self.l_cls(flat, update_stats=update_stats)
-            if self.l_proj is not None:
-                proj_BxC = self.l_proj(flat, update_stats=update_stats)
-                adv_B = adv_B + jnp.take_along_axis(proj_BxC, labels_B.astype(jnp.int32)[:, None], axis=1)[:, 0]
+            proj_BxC = self.l_proj(flat, update_stats=update_stats)
+            adv_B = adv_B + jnp.take_along_axis(proj_BxC, labels_B.astype(jnp.int32)[:, None], axis=1)[:, 0]
         return adv_B, cls_BxC

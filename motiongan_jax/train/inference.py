@@ -63,4 +63,8 @@ def generator_apply(state: TrainState, curve_vel_BxTx3: jax.Array, labels_B: jax
         labels_B = jnp.asarray(labels_B, jnp.int32)
         z = _zeros_z(state, labels_B.shape[0]) if z_BxZ is None else z_BxZ
         w_BxD = g.style(labels_B, z)
+    if phase_offset_B is None:
+        return g(curve_vel_BxTx3, w_BxD)
+    if not getattr(g, "gait_phase", False):
+        raise ValueError("a phase given, but this G has no gait phase (model.gait_phase)")
     return g(curve_vel_BxTx3, w_BxD, phase_offset_B)

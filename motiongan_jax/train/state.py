@@ -15,7 +15,14 @@ import optax
 from flax import nnx, struct
 
 from motiongan_jax.motion.representation import LENGTH_UNIT_M, rest_positions
-from motiongan_jax.nn import Discriminator, Generator, SpectralNormState, init_split
+from motiongan_jax.nn import (
+    Discriminator,
+    Generator,
+    ProjectionDiscriminator,
+    SpectralNormState,
+    WalkerGenerator,
+    init_split,
+)
 
 
 @struct.dataclass
@@ -72,20 +79,23 @@ def generator_bones(model_cfg, layout) -> tuple[tuple[int, int, float], ...] | N
 
 def _build_g(model_cfg, num_rel_joints: int, num_styles: int, rest_pose_R, key, impl: str = "fast",
              dtype: str = "float32", bones=None) -> Generator:
+    """The paper's G, or the walker around it when the model section asks for any of its options."""
     m = model_cfg
-    return Generator(num_rel_joints, base_channels=m.top, kt=m.kw, w_dim=m.w_dim, z_dim=m.z_dim,
-                     num_styles=num_styles, latent_init=m.latent_init, length_unit=LENGTH_UNIT_M,
-                     rest_pose_R=rest_pose_R, residual_root=m.output_prior, frame=m.g_frame, bones=bones,
-                     gait_phase=m.gait_phase, root_height=m.root_height, impl=impl, compute_dtype=dtype,
-                     rngs=nnx.Rngs(key))
+    paper = dict(base_channels=m.top, kt=m.kw, w_dim=m.w_dim, z_dim=m.z_dim, num_styles=num_styles,
+                 latent_init=m.latent_init, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype,
+                 rngs=nnx.Rngs(key))
+    if not (m.output_prior or m.g_frame != "world" or bones is not None or m.gait_phase or m.root_height):
+        return Generator(num_rel_joints, **paper)
+    return WalkerGenerator(num_rel_joints, rest_pose_R=rest_pose_R, residual_root=m.output_prior, frame=m.g_frame,
+                           bones=bones, gait_phase=m.gait_phase, root_height=m.root_height, **paper)
 
 
 def _build_d(model_cfg, seq_len: int, num_rel_joints: int, num_styles: int, key, impl: str = "fast",
              dtype: str = "float32") -> Discriminator:
-    return Discriminator(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.top,
-                         kt=model_cfg.kw, length_unit=LENGTH_UNIT_M, impl=impl,
-                         compute_dtype=dtype, projection=model_cfg.d_cond,
-                         rngs=nnx.Rngs(key))
+    """The paper's D, or with model.d_cond its projection variant."""
+    build = ProjectionDiscriminator if model_cfg.d_cond else Discriminator
+    return build(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.top,
+                 kt=model_cfg.kw, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype, rngs=nnx.Rngs(key))
 
 
 def build_models(cfg, num_rel_joints: int, num_styles: int, key: jax.Array, layout=None, *,

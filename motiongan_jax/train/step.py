@@ -104,7 +104,7 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
             phase_BxT = None
             if rec_half:
                 phase_BxT = jnp.where(rec_B[:, None], batch["phase_BxT"], g.walked_phase(curve_vel, w, phase))
-            root_vel, pose = g(curve_vel, w, phase, phase_BxT)
+            root_vel, pose = g(curve_vel, w, phase, phase_BxT) if cfg.model.gait_phase else g(curve_vel, w)
             return root_vel, pose, (g.log_stride(w) if cfg.model.gait_phase else None)
 
         fake, g_vjp = jax.vjp(g_forward, state.g_params)

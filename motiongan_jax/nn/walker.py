@@ -1,0 +1,166 @@
+"""The small configs' G: the paper's network (nn/generator.py) with the departures around it.
+
+`WalkerGenerator` keeps the paper's layers, parameter names and initial values (the stride head
+is the one layer it adds, built after them) and changes only what goes into `Generator.network`
+and what is done with its heads, in this order: the curve frame and gait phase on the way in;
+root height, output prior, exact bones and the curve frame on the way out. docs/RESULTS.md
+§5-§10 say why each was added and what it changed.
+
+* Output prior (model.output_prior): the pose head adds the skeleton's rest
+  pose (`rest_pose_R`, metres) and the root head the input curve velocity, so G starts as a rest
+  pose gliding along the curve instead of a collapsed body standing still.
+* Curve frame (model.g_frame = "curve"): G works in the walker's frame. Its input is each curve
+  velocity seen from the previous one's heading, u[t] = R(-θ[t-1]) v[t]; its outputs are turned
+  by the curve's smoothed heading (`curves.smooth_heading`) before the world curve velocity is
+  added. Rotating the curve rotates the motion exactly, so G need not learn every direction
+  the rotation augmentation draws.
+* Exact bones (model.exact_bones): the pose head's bones keep their directions and take the
+  skeleton's lengths, joint by joint from the root (`project_bones`), so no head of D can be
+  answered with a stretched body.
+* Gait phase (model.gait_phase): an equal-arc-length curve is nearly constant on straight
+  stretches, so a convolutional G has nothing to hang a gait cycle on. With the option G keeps
+  a clock in walked distance, φ[t] = φ0 + 2π s[t] / λ(w) (`walked_phase`), λ(w) the style's
+  stride length from `stride_head` (trained on strides measured on real clips,
+  `losses.stride_loss`), φ0 random per training sample (`train.objectives.sample_phase`), 0 at generation.
+  sin and cos of φ and 2φ (`gait_phase`) enter ec0_0, the skips e1 and e2 and dc1_0's input.
+  A clock in distance stays right under the FPS augmentation.
+* Root height (model.root_height): the root head's y channel is the root's height (up to a
+  constant), and the y velocity G returns is its difference, so a small bias cannot drift the
+  body off the floor along a long curve.
+"""
+
+from __future__ import annotations
+
+import chex
+import jax
+import jax.numpy as jnp
+from flax import nnx
+
+from motiongan_jax.config import GFrame, choices
+from motiongan_jax.data import curves
+from motiongan_jax.nn.generator import Generator
+from motiongan_jax.nn.layers import Dense, zeros_init
+
+
+def project_bones(pose_BxTxR: jax.Array, bones) -> jax.Array:
+    """Root-relative rows whose bones keep the directions of `pose_BxTxR` and have the lengths of
+    `bones` ((parent, child, length), joints numbered with the root as 0, parents first)."""
+    b, t, r = pose_BxTxR.shape
+    raw = jnp.concatenate([jnp.zeros((b, t, 1, 3), pose_BxTxR.dtype), pose_BxTxR.reshape(b, t, r // 3, 3)], axis=2)
+    out = [raw[:, :, 0]] + [None] * (r // 3)
+    for parent, child, length in sorted(bones, key=lambda x: x[1]):
+        d = raw[:, :, child] - raw[:, :, parent]
+        norm = jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True) + 1e-12)
+        out[child] = out[parent] + (length / norm) * d
+    return jnp.stack(out[1:], axis=2).reshape(b, t, r)
+
+
+PHASE_HARMONICS = 2  # φ and 2φ: a foot's cycle and the body's bounce, twice per stride
+# Adam moves a parameter by about the learning rate per step, whatever its gradient; this gain on
+# the stride head's output lets the stride reach its targets in hundreds of steps, not thousands.
+STRIDE_GAIN = 10.0
+PHASE_CHANNELS = 2 * PHASE_HARMONICS
+
+
+def walked_phase(curve_vel_BxTx3: jax.Array, stride_B: jax.Array, offset_B: jax.Array) -> jax.Array:
+    """B x T gait phase (radians) φ[t] = φ0 + 2π s[t] / λ, where s[t] is the horizontal distance
+    walked up to sample t (the sum of |v[1..t]|, metres; v[0] duplicates v[1] and is not walked, as
+    in curves.integrate), λ = `stride_B` metres and φ0 = `offset_B` radians."""
+    b = curve_vel_BxTx3.shape[0]
+    chex.assert_shape((stride_B, offset_B), (b,))
+    step_BxT = jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1).at[:, 0].set(0.0)
+    return offset_B[:, None] + 2 * jnp.pi * jnp.cumsum(step_BxT, axis=1) / stride_B[:, None]
+
+
+def gait_phase(phase_BxT: jax.Array) -> jax.Array:
+    """B x T x 4 channels of a phase: [sin φ, sin 2φ, cos φ, cos 2φ]."""
+    k_H = jnp.arange(1, PHASE_HARMONICS + 1, dtype=jnp.float32)
+    a_BxTxH = phase_BxT[..., None] * k_H
+    return jnp.concatenate([jnp.sin(a_BxTxH), jnp.cos(a_BxTxH)], -1)
+
+
+class WalkerGenerator(Generator):
+    """The paper's G with the small configs' options (the module docstring): `rest_pose_R` and
+    `residual_root` (model.output_prior), `frame` (model.g_frame), `bones` (model.exact_bones),
+    `gait_phase`, `root_height`. The other arguments are the paper's."""
+
+    def __init__(self, num_rel_joints: int = 27, *, rest_pose_R: tuple[float, ...] | None = None,
+                 residual_root: bool = False, frame: GFrame = "world",
+                 bones: tuple[tuple[int, int, float], ...] | None = None, gait_phase: bool = False,
+                 root_height: bool = False, rngs: nnx.Rngs, **paper):
+        super().__init__(num_rel_joints, side_channels=PHASE_CHANNELS if gait_phase else 0, rngs=rngs, **paper)
+        if rest_pose_R is not None and len(rest_pose_R) != self.num_rows:
+            raise ValueError(f"rest_pose_R has {len(rest_pose_R)} rows, G makes {self.num_rows}")
+        # a tuple of floats: static (part of the graph definition), not a parameter
+        self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
+        self.residual_root = bool(residual_root)
+        if frame not in choices(GFrame):
+            raise ValueError(f"frame must be one of {choices(GFrame)}, got {frame!r}")
+        self.frame = frame
+        if bones is not None:
+            bones = tuple((int(a), int(b), float(length)) for a, b, length in bones)
+            if sorted(b for _, b, _ in bones) != list(range(1, num_rel_joints + 1)) or any(a >= b for a, b, _ in bones):
+                raise ValueError("bones must be (parent, child, length) with each joint 1..J a child once, "
+                                 "parents before children")
+        self.bones = bones  # static: part of the graph definition
+        self.gait_phase = bool(gait_phase)  # static
+        self.root_height = bool(root_height)
+        # log stride length (metres) of the style; zero init: 1 m strides until trained
+        self.stride_head = (Dense(self.w_dim, 1, kernel_init=zeros_init, bias_init=zeros_init, rngs=rngs)
+                            if self.gait_phase else None)
+
+    def log_stride(self, w_BxD: jax.Array) -> jax.Array:
+        """log of the stride length λ(w) in metres (B), for a G with a gait phase."""
+        if self.stride_head is None:
+            raise ValueError("this G has no gait phase (model.gait_phase)")
+        return STRIDE_GAIN * self.stride_head(w_BxD)[:, 0]
+
+    def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array,
+                     phase_offset_B: jax.Array | None = None) -> jax.Array:
+        """B x T: the phase this G walks a curve with (`walked_phase` at its stride λ(w), offset
+        default 0)."""
+        b = curve_vel_BxTx3.shape[0]
+        offset_B = jnp.zeros((b,), jnp.float32) if phase_offset_B is None else phase_offset_B
+        # the stride is learned from measured strides alone (losses.stride_loss): the GAN's
+        # gradient through sin(2π s / λ) is periodic in 1/λ and would only add noise
+        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxD)))
+        return walked_phase(curve_vel_BxTx3, stride_B, offset_B)
+
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array, phase_offset_B: jax.Array | None = None,
+                 phase_BxT: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        """(root_vel_BxTx3, pose_BxTxR). A G with a gait phase walks with `self.walked_phase`
+        (`phase_offset_B` radians, default 0), or with the given `phase_BxT` (radians: a real
+        window's measured phase, for reconstruction)."""
+        b, t = curve_vel_BxTx3.shape[:2]
+        vel_in = curve_vel_BxTx3
+        if self.frame == "curve":
+            theta_BxT = curves.heading(curve_vel_BxTx3)
+            vel_in = curves.rotate_y(curve_vel_BxTx3, -jnp.concatenate([theta_BxT[:, :1], theta_BxT[:, :-1]], 1))
+        x = (vel_in / self.length_unit)[..., None]  # B x T x 3 x 1
+        phase_BxTx1xP = None
+        if self.gait_phase:
+            if phase_BxT is None:
+                phase_BxT = self.walked_phase(curve_vel_BxTx3, w_BxD, phase_offset_B)
+            phase_BxTx1xP = gait_phase(phase_BxT)[:, :, None, :].astype(self.compute_dtype)
+            x = jnp.concatenate([x, jnp.broadcast_to(phase_BxTx1xP, (b, t, 3, PHASE_CHANNELS))], -1)
+        elif phase_offset_B is not None or phase_BxT is not None:
+            raise ValueError("a phase given, but this G has no gait phase (model.gait_phase)")
+
+        root_vel_BxTx3, pose_BxTxR = self.network(x, w_BxD, phase_BxTx1xP)
+
+        if self.root_height:  # y is a height: its difference is the velocity (v[0] = v[1])
+            h_BxT = root_vel_BxTx3[..., 1]
+            dh_BxT = h_BxT[:, 1:] - h_BxT[:, :-1]
+            root_vel_BxTx3 = root_vel_BxTx3.at[..., 1].set(jnp.concatenate([dh_BxT[:, :1], dh_BxT], 1))
+        if self.rest_pose_R is not None:
+            pose_BxTxR = pose_BxTxR + jnp.asarray(self.rest_pose_R, pose_BxTxR.dtype)
+        if self.bones is not None:
+            pose_BxTxR = project_bones(pose_BxTxR, self.bones)
+        if self.frame == "curve":
+            out_BxT = curves.smooth_heading(curve_vel_BxTx3)
+            root_vel_BxTx3 = curves.rotate_y(root_vel_BxTx3, out_BxT)
+            r = pose_BxTxR.shape[2]
+            pose_BxTxR = curves.rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), out_BxT[..., None]).reshape(b, t, r)
+        if self.residual_root:
+            root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
+        return root_vel_BxTx3, pose_BxTxR
