@@ -63,7 +63,8 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
 
     def g_forward(g_params):
         g = nnx.merge(state.g_def, g_params, copy=True)
-        return g(curve_vel, g.style(labels, z), phase)
+        w = g.style(labels, z)
+        return g(curve_vel, w) if phase is None else g(curve_vel, w, phase)  # the paper's G takes no phase
 
     def g_fwd_bwd(g_params, cot):
         out, vjp = jax.vjp(g_forward, g_params)

@@ -33,10 +33,10 @@ def discriminator_probe(state, batch: dict, key) -> dict:
     floating[:, 1:, 1] += PROBE_FLOAT_M / (T - 1)
     floating[:, 0, 1] = floating[:, 1, 1]
     z = jax.random.normal(key, (B, inference.generator_z_dim(state)), jnp.float32)
-    g = inference.generator(state)
     offset = (jax.random.uniform(jax.random.fold_in(key, 1), (B,), jnp.float32, 0.0, 2 * np.pi)
               if inference.has_gait_phase(state) else None)
-    fake_vel, fake_pose = g(curves.velocity(jnp.asarray(batch["curve_BxTx3"])), g.style(jnp.asarray(labels), z), offset)
+    fake_vel, fake_pose = inference.generator_apply(state, curves.velocity(jnp.asarray(batch["curve_BxTx3"])),
+                                                    jnp.asarray(labels), z, phase_offset_B=offset)
     inputs = {
         "real windows": (vel, pose),
         "statue gliding along the root": (vel, np.broadcast_to(pose.mean(1, keepdims=True), pose.shape)),
