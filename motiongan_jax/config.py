@@ -413,7 +413,7 @@ def bandai() -> Config:
 
 
 def small() -> Config:
-    """A smaller model that learns to walk in styles on 2 CPU cores in about 21 minutes (7,000
+    """A smaller model that learns to walk in styles on 2 CPU cores in 19-23 minutes (7,000
     steps), on the embedded dataset (60 fps: a step of 4 gives 15 Hz, T 32 a 2.1 s window); the
     shipped model. Narrower (top 16) and with the departures from the paper that made it learn,
     each measured in docs/RESULTS.md (its "The small preset" paragraph lists them by §)."""
