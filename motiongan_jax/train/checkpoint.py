@@ -95,22 +95,22 @@ def resolve_step(workdir: str | Path, step: int | None = None) -> int:
     """`step`, or by default the run's model: the latest checkpoint with no upset of D in the
     steps its G remembers (health.py, from metrics.jsonl). The latest checkpoint when the run has
     no log or every checkpoint follows an upset; a warning says when it is not the latest."""
-    mngr = run_manager(workdir)
+    return _step_and_meta(run_manager(workdir), workdir, step)[0]
+
+
+def _step_and_meta(mngr: ocp.CheckpointManager, workdir, step: int | None) -> tuple[int, dict]:
     latest, meta = read_meta(mngr, step)
     if step is not None:
-        return latest
+        return latest, meta
     train = from_dict(meta["config"]).train
-    upsets = health.upset_steps(health.read_log(workdir), train.num_steps)
-    memory = health.memory_steps(train.g_ema_decay)
-    chosen = health.model_step(mngr.all_steps(), upsets, memory)
-    recent = [u for u in upsets if latest - memory < u <= latest]
+    chosen, recent = health.assess(health.read_log(workdir), mngr.all_steps(), train.num_steps, train.g_ema_decay)
     if chosen is None and recent:
         _log.warning(f"every checkpoint in {workdir} follows an upset of D (health.py); using the latest, {latest}")
     elif chosen is not None and chosen != latest:
         _log.warning(f"using checkpoint {chosen} of {workdir}: D upset the run at steps {recent[0]}-{recent[-1]}, "
                      f"which checkpoint {latest} remembers (health.py); --step {latest} to use it")
-        return chosen
-    return latest
+        return read_meta(mngr, chosen)
+    return latest, meta
 
 
 def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
@@ -121,7 +121,7 @@ def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
     from motiongan_jax.train import state as train_state
 
     mngr = run_manager(workdir)
-    step, meta = read_meta(mngr, resolve_step(workdir, step))
+    step, meta = _step_and_meta(mngr, workdir, step)
     cfg, layout, like = abstract_model(meta)
     state = restore(mngr, step, like)
     return train_state.inference_state(state, params), meta, cfg, layout

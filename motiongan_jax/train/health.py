@@ -52,6 +52,16 @@ def memory_steps(g_ema_decay: float) -> int:
     return round(1 / (1 - g_ema_decay)) if g_ema_decay > 0 else WINDOW_STEPS
 
 
+def assess(records: Sequence[dict], checkpoint_steps: Sequence[int], num_steps: int,
+           g_ema_decay: float) -> tuple[int | None, list[int]]:
+    """(the run's model, `model_step`; the upsets the newest of `checkpoint_steps` remembers)
+    from metrics.jsonl's `records` of a run of `num_steps` with G's moving average `g_ema_decay`."""
+    upsets = upset_steps(records, num_steps)
+    memory = memory_steps(g_ema_decay)
+    newest = max(checkpoint_steps)
+    return model_step(checkpoint_steps, upsets, memory), [u for u in upsets if newest - memory < u <= newest]
+
+
 def model_step(checkpoint_steps: Sequence[int], upsets: Sequence[int], memory: int) -> int | None:
     """The latest of `checkpoint_steps` with no upset in the `memory` steps up to it; None when
     every checkpoint has one (or there are none)."""

@@ -234,13 +234,11 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
 def _warn_if_upset(workdir: Path, cfg: Config, checkpoint_steps, log) -> bool:
     """Log a warning when the newest checkpoint follows an upset of D (health.py), naming the
     checkpoint that generation, evaluation and export now use; True if it did."""
-    upsets = health.upset_steps(health.read_log(workdir), cfg.train.num_steps)
-    memory = health.memory_steps(cfg.train.g_ema_decay)
-    newest = max(checkpoint_steps)
-    recent = [u for u in upsets if newest - memory < u <= newest]
+    chosen, recent = health.assess(health.read_log(workdir), checkpoint_steps, cfg.train.num_steps,
+                                   cfg.train.g_ema_decay)
     if not recent:
         return False
-    chosen = health.model_step(checkpoint_steps, upsets, memory)
+    newest = max(checkpoint_steps)
     log(f"warning: D upset the run: it judged at least {health.ACCURACY:.0%} of the logged real and fake "
         f"windows right over the {health.WINDOW_STEPS} steps up to step {recent[0]}"
         + (f" (and up to {recent[-1]})" if len(recent) > 1 else "")
