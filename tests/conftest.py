@@ -48,6 +48,19 @@ def compiled_call(module, *args, **kwargs):
     return compiled(lambda state, *a: nnx.merge(graphdef, state)(*a, **kwargs), state, *args)(state, *args)
 
 
+# The files whose tests take longest in all (docs/TESTING.md, Durations), longest first: with
+# `--dist loadfile` (pyproject.toml) xdist hands whole files to the workers in collection order,
+# and longest-first keeps the two workers' shares even.
+SLOW_FILES = ("test_step.py", "test_fast_equals_reference.py", "test_multiprocess.py", "test_train.py",
+              "test_analysis.py", "test_notebook.py", "test_evaluation.py", "test_generate.py", "test_parallel.py",
+              "test_nn.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(SLOW_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(SLOW_FILES)))  # stable: each file's own order
+
+
 def load_cli(name: str):
     """motiongan_jax.cli.NAME, the tool behind bin/NAME.py (its `main(argv)` returns the exit status)."""
     return importlib.import_module(f"motiongan_jax.cli.{name}")

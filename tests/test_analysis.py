@@ -253,7 +253,7 @@ def test_cli_writes_every_file(run, repo, tmp_path, capsys):
     clip = Path(meta["data_dir"]) / f"{meta['style_names'][1]}_02.bvh"
     out = tmp_path / "out"
     rc = _cli(repo).main(["--workdir", str(wd), "--out", str(out), "--k", "3", "--search", str(clip),
-                          "--search-steps", "100", "--search-keep", "2", "--search-random", "1",
+                          "--search-steps", "10", "--search-keep", "2", "--search-random", "1",
                           "--search-windows", "1", "--search-T", "64", "--search-curve", "line"])
     assert rc == 0, capsys.readouterr().err
     for name in ("pca.png", "heatmap.png", "nearest.md", "analysis.json", "search.json", "search.npz"):

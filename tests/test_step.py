@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import NamedTuple
 
 import chex
@@ -293,16 +294,33 @@ def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
         validate(dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="body")))
 
 
-def test_projection_d_judges_each_window_as_its_label():
+EMA_DECAY = 0.75
+
+
+@pytest.fixture(scope="module")
+def projection_ema():
+    """(paper config, its variant with a projection D and G's moving average, that variant's
+    initial state and compiled step) at top 4: one program for the projection and the
+    moving-average tests, whose options do not interact."""
+    plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4)))
+    cfg = validate(dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, d_cond=True),
+                                       train=dataclasses.replace(plain_cfg.train, g_ema_decay=EMA_DECAY)))
+    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state0, _batch(), jax.random.key(1)).compile(
+        compiler_options=FAST)
+    return plain_cfg, cfg, state0, step
+
+
+def test_projection_d_judges_each_window_as_its_label(projection_ema):
     """model.d_cond: the verdict is the paper D's plus <V[y], flat>, with y the
     label the window is judged as; the paper's layers start from the same values; the step
     judges fakes as the labels G was asked for, and a projection D without labels is refused."""
     from motiongan_jax.nn.discriminator import flatten_channel_major
     from motiongan_jax.nn.layers import leaky_relu
 
-    cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, d_cond=True)))
+    paper_cfg, cfg, state0, train_step = projection_ema
     d = train_state._build_d(cfg.model, T, J, C, jax.random.key(0))
-    d0 = train_state._build_d(CFG.model, T, J, C, jax.random.key(0))
+    d0 = train_state._build_d(paper_cfg.model, T, J, C, jax.random.key(0))
     shared = {k: v for k, v in nnx.to_pure_dict(nnx.state(d, nnx.Param)).items() if k != "l_proj"}
     assert _leaves_equal(shared, nnx.to_pure_dict(nnx.state(d0, nnx.Param)))
     batch = _batch()
@@ -324,14 +342,12 @@ def test_projection_d_judges_each_window_as_its_label():
         return float(objectives.d_losses(dd, vel, pose, batch["root_BxTx3"], pose, batch["label_B"], cfg.train,
                                        jnp.array(fake_labels, jnp.int32))["d_adv_fake"])
     assert abs(fake_term(cfg.model, [2, 3]) - fake_term(cfg.model, [0, 1])) > 1e-4
-    assert fake_term(CFG.model, [2, 3]) == fake_term(CFG.model, [0, 1])
+    assert fake_term(paper_cfg.model, [2, 3]) == fake_term(paper_cfg.model, [0, 1])
     # and the whole step trains with it
-    state = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    train_step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state, batch, jax.random.key(7)).compile(
-        compiler_options=FAST)
-    state, metrics = train_step(state, batch, jax.random.key(7))
+    state, metrics = train_step(state0, batch, jax.random.key(7))
     assert all(np.isfinite(float(v)) for v in metrics.values())
-    assert float(jnp.abs(state.d_params["l_proj"]["kernel"] - d.l_proj.kernel[...]).max()) > 0  # V is trained
+    v0 = state0.d_params["l_proj"]["kernel"]
+    assert float(jnp.abs(state.d_params["l_proj"]["kernel"] - v0).max()) > 0  # V is trained
     with pytest.raises(ValueError, match="d_cond"):
         validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, d_cond="projection")))
 
@@ -452,43 +468,75 @@ def _gait_cfg():
     return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), contact_height_m=0.02, toe_joints=(4, 9))
 
 
+GAIT_KEY = jax.random.key(3)
+
+
+@functools.lru_cache(maxsize=None)
+def _gait_step(rec_z: str):
+    """The gait config with the reconstructed half (z = 0 or as drawn) and the root-jerk term:
+    (cfg, gait targets, batch, initial state, new state, metrics) of one step, compiled once per
+    `rec_z` (the "zero" one serves the gait test too)."""
+    cfg0, gait = _gait_cfg()
+    cfg = validate(dataclasses.replace(cfg0, train=dataclasses.replace(
+        cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0)))
+    batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
+             "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2}
+    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    # at init w barely depends on z: a larger latent transform lets the two choices differ
+    g_params = jax.tree.map(lambda x: x, state0.g_params)
+    g_params["latent"] = jax.tree.map(lambda x: 10.0 * x, g_params["latent"])
+    state0 = state0.replace(g_params=g_params)
+    state, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, GAIT_KEY).compile(
+        compiler_options=FAST)(state0, batch, GAIT_KEY)
+    return cfg, gait, batch, state0, state, m
+
+
+def _fake_labels_and_z(cfg, batch, key):
+    """The labels and z the step gives G: its own style (and z = 0 if so configured) for the
+    reconstructed first window."""
+    labels, z = objectives.sample_labels_and_z(cfg, C, B, key)
+    labels = labels.at[0].set(batch["label_B"][0])
+    return labels, (z.at[0].set(0.0) if cfg.train.rec_z == "zero" else z)
+
+
 def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head():
-    cfg, gait = _gait_cfg()
+    gait_cfg, gait = _gait_cfg()
     assert objectives.sample_phase(CFG, B, jax.random.key(0)) is None
-    ph = objectives.sample_phase(cfg, 1000, jax.random.key(0))
+    ph = objectives.sample_phase(gait_cfg, 1000, jax.random.key(0))
     chex.assert_shape(ph, (1000,))
     assert float(ph.min()) >= 0.0 and float(ph.max()) < 2 * np.pi and abs(float(ph.mean()) - np.pi) < 0.2
     # the offsets come from their own stream: labels and z are those of a config without them
-    assert _leaves_equal(objectives.sample_labels_and_z(cfg, C, B, jax.random.key(5)),
+    assert _leaves_equal(objectives.sample_labels_and_z(gait_cfg, C, B, jax.random.key(5)),
                          objectives.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
     with pytest.raises(ValueError, match="need gait targets"):
-        step_lib.make_train_step(cfg, LAYOUT, C)
+        step_lib.make_train_step(gait_cfg, LAYOUT, C)
     with pytest.raises(ValueError, match="3 stride lengths for 4 styles"):
-        step_lib.make_train_step(cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
-    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, _batch(), jax.random.key(1)).compile(
-        compiler_options=FAST)
-    state, m = step(state0, _batch(), jax.random.key(1))
+        step_lib.make_train_step(gait_cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
+    cfg, gait, batch, state0, state, m = _gait_step("zero")
     chex.assert_tree_all_finite(m)
     assert {"g_stride", "g_floor", "g_skate"} <= set(m) and float(m["g_stride"]) > 0  # values: tests/test_losses.py
     k0 = state0.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
     assert float(jnp.abs(state.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :] - k0).min()) > 0  # phase weights train
-    # only the stride term reaches the stride head (G's phase sees a stop-gradient stride), so its
-    # gradient is that of mean((log λ - log target)²) by hand, and Adam's first step is -lr·sign(g)
+    # only the stride term reaches the stride head (G's phase sees a stop-gradient stride, the
+    # reconstructed window walks its measured phase), so its gradient is that of
+    # mean((log λ - log target)²) by hand, and Adam's first step is -lr·sign(g)
     from motiongan_jax.nn.walker import STRIDE_GAIN
 
-    labels, z = objectives.sample_labels_and_z(cfg, C, B, jax.random.key(1))
+    labels, z = _fake_labels_and_z(cfg, batch, GAIT_KEY)
     g0 = inference.generator(state0)
     w = np.asarray(g0.style(labels, z))
     err = np.asarray(g0.log_stride(jnp.asarray(w))) - np.log(np.asarray(gait.stride_m_C))[np.asarray(labels)]
     assert float(m["g_stride"]) == pytest.approx(np.mean(err**2), rel=1e-5)
     grad_kernel, grad_bias = 2 * STRIDE_GAIN * (err[:, None] * w).mean(0), 2 * STRIDE_GAIN * err.mean()
     lr = cfg.train.lr_g
-    np.testing.assert_allclose(np.asarray(state.g_params["stride_head"]["kernel"][...])[:, 0],
-                               -lr * np.sign(grad_kernel), rtol=1e-4)
-    assert float(state.g_params["stride_head"]["bias"][...][0]) == pytest.approx(-lr * np.sign(grad_bias), rel=1e-4)
+    k1 = np.asarray(state.g_params["stride_head"]["kernel"][...])[:, 0]
+    np.testing.assert_allclose(k1 - np.asarray(state0.g_params["stride_head"]["kernel"][...])[:, 0],
+                               -lr * np.sign(grad_kernel), rtol=1e-4, atol=1e-9)
+    b1 = float(state.g_params["stride_head"]["bias"][...][0])
+    assert b1 - float(state0.g_params["stride_head"]["bias"][...][0]) == pytest.approx(-lr * np.sign(grad_bias),
+                                                                                       rel=1e-4)
     with pytest.raises(ValueError, match="gait_phase"):
-        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, gait_phase=False)))
+        validate(dataclasses.replace(gait_cfg, model=dataclasses.replace(gait_cfg.model, gait_phase=False)))
 
 
 def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
@@ -498,29 +546,14 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
     from motiongan_jax.motion.representation import LENGTH_UNIT_M
     from motiongan_jax.train import losses
 
-    cfg0, gait = _gait_cfg()
-    batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
-             "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2}
-    key = jax.random.key(3)
-    curve_vel, real_vel = curves.velocity(batch["curve_BxTx3"]), curves.velocity(batch["root_BxTx3"])
     g_rec = {}
     for rec_z in ("zero", "sampled"):
-        cfg = validate(dataclasses.replace(cfg0, train=dataclasses.replace(
-            cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0)))
-        state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
-        # at init w barely depends on z: a larger latent transform lets the two choices differ
-        g_params = jax.tree.map(lambda x: x, state0.g_params)
-        g_params["latent"] = jax.tree.map(lambda x: 10.0 * x, g_params["latent"])
-        state0 = state0.replace(g_params=g_params)
-        _, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, key).compile(
-            compiler_options=FAST)(state0, batch, key)
-        labels, z = objectives.sample_labels_and_z(cfg, C, B, key)
-        labels = labels.at[0].set(batch["label_B"][0])
-        if rec_z == "zero":
-            z = z.at[0].set(0.0)
+        cfg, _, batch, state0, _, m = _gait_step(rec_z)
+        curve_vel, real_vel = curves.velocity(batch["curve_BxTx3"]), curves.velocity(batch["root_BxTx3"])
+        labels, z = _fake_labels_and_z(cfg, batch, GAIT_KEY)
         g = inference.generator(state0)
         w = g.style(labels, z)
-        offset = objectives.sample_phase(cfg, B, key)
+        offset = objectives.sample_phase(cfg, B, GAIT_KEY)
         phase_BxT = g.walked_phase(curve_vel, w, offset).at[0].set(batch["phase_BxT"][0])
         root_vel, pose = g(curve_vel, w, offset, phase_BxT)
         want_rec = losses.reconstruction_loss(root_vel[:1], pose[:1], real_vel[:1], batch["pose_BxTxR"][:1],
@@ -530,25 +563,19 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
         assert float(m["g_root_jerk"]) == pytest.approx(float(want_jerk), rel=1e-4, abs=1e-9)
         g_rec[rec_z] = float(m["g_rec"])
     assert g_rec["zero"] != pytest.approx(g_rec["sampled"], rel=1e-3)  # the drawn z reaches the half
+    cfg0, _ = _gait_cfg()
     with pytest.raises(Exception, match="train.rec_z"):
         validate(dataclasses.replace(cfg0, train=dataclasses.replace(cfg0.train, rec_z="sampled")))
 
 
-def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged():
-    decay = 0.75
-    plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4)))
-    cfg = validate(dataclasses.replace(plain_cfg, train=dataclasses.replace(plain_cfg.train, g_ema_decay=decay)))
-    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
-    assert train_state.init_state(plain_cfg, LAYOUT, C, jax.random.key(0)).g_ema_params is None
+def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(projection_ema):
+    decay = EMA_DECAY
+    _, cfg, state0, step = projection_ema
+    no_average = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, g_ema_decay=0.0))
+    assert train_state.init_state(no_average, LAYOUT, C, jax.random.key(0)).g_ema_params is None
     assert _leaves_equal(state0.g_ema_params, state0.g_params)
-
-    def compiled(c, s):
-        return jax.jit(step_lib.make_train_step(c, LAYOUT, C)).lower(s, _batch(), jax.random.key(1)).compile(
-            compiler_options=FAST)
-
     # (that the average never feeds back, training being that of a run without it, is checked bit
     # for bit through the training loop: tests/test_train.py's resume test)
-    step = compiled(cfg, state0)
     raw = [jax.tree.map(np.asarray, state0.g_params)]
     state, plain = state0, state0.replace(g_ema_params=None)
     for i in range(2):
