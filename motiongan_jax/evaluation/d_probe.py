@@ -11,11 +11,18 @@ import scipy.special
 from scipy.ndimage import gaussian_filter1d
 
 from motiongan_jax.data import curves
+from motiongan_jax.generate import walk
 from motiongan_jax.train import inference
 
 PROBE_WINDOWS = 128  # real training windows the probe judges
 PROBE_SMOOTHING_SAMPLES = 2.0  # Gaussian sigma of the "no steps" window
 PROBE_FLOAT_M = 0.3  # how far the "floating" window's root rises over the window
+
+
+@jax.jit
+def _d_logit(state, vel_BxTx3, pose_BxTxR, labels_B):
+    # compiled once for the five inputs (op by op, D's dispatch costs more than its compile)
+    return inference.discriminator(state)(vel_BxTx3, pose_BxTxR, update_stats=False, labels_B=labels_B)[0]
 
 
 def discriminator_probe(state, batch: dict, key) -> dict:
@@ -35,8 +42,8 @@ def discriminator_probe(state, batch: dict, key) -> dict:
     z = jax.random.normal(key, (B, inference.generator_z_dim(state)), jnp.float32)
     offset = (jax.random.uniform(jax.random.fold_in(key, 1), (B,), jnp.float32, 0.0, 2 * np.pi)
               if inference.has_gait_phase(state) else None)
-    fake_vel, fake_pose = inference.generator_apply(state, curves.velocity(jnp.asarray(batch["curve_BxTx3"])),
-                                                    jnp.asarray(labels), z, phase_offset_B=offset)
+    w = inference.latent_w(state, jnp.asarray(labels), z)
+    fake_vel, fake_pose = walk.apply_code(state, curves.velocity(jnp.asarray(batch["curve_BxTx3"])), w, offset)
     inputs = {
         "real windows": (vel, pose),
         "statue gliding along the root": (vel, np.broadcast_to(pose.mean(1, keepdims=True), pose.shape)),
@@ -45,11 +52,8 @@ def discriminator_probe(state, batch: dict, key) -> dict:
         f"root rising {PROBE_FLOAT_M:g} m over the window": (floating, pose),
         "G's output for the same curves and labels": (np.asarray(fake_vel), np.asarray(fake_pose)),
     }
-    d = inference.discriminator(state)
     out = {}
     for name, (v, p) in inputs.items():
-        logit, _ = d(jnp.asarray(v, jnp.float32), jnp.asarray(p, jnp.float32), update_stats=False,
-                     labels_B=jnp.asarray(labels))
-        logit = np.asarray(logit, np.float64)
+        logit = np.asarray(_d_logit(state, np.asarray(v, np.float32), np.asarray(p, np.float32), labels), np.float64)
         out[name] = {"p_real": float(np.mean(scipy.special.expit(logit))), "judged_real": float(np.mean(logit > 0))}
     return out
