@@ -149,6 +149,9 @@ class TrainConfig:
     # velocity exceeds the real windows' (losses.root_jerk_excess): G may not plant a foot by
     # shaking the whole body.
     w_g_root_jerk: float = 0.0
+    # Joint jerk (0 in the paper): how far each world joint's mean squared third difference exceeds
+    # the same joint's in the real windows, summed over joints (losses.joint_jerk_excess).
+    w_g_joint_jerk: float = 0.0
     w_d_adv: float = 1.0
     w_d_cls: float = 5.0
     # Number of points of the curve loss (paper: 4).
@@ -289,7 +292,7 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
     need(t.log_every >= 1 and t.checkpoint_every >= 1 and t.preview_every >= 0, "train.log_every",
          "log/checkpoint intervals must be >= 1")
     need(0.0 <= t.g_ema_decay < 1.0, "train.g_ema_decay", "must be in [0, 1) (0: no average)")
-    for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec", "w_g_root_jerk"):
+    for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec", "w_g_root_jerk", "w_g_joint_jerk"):
         need(getattr(t, name) >= 0, f"train.{name}", "loss weights must be >= 0")
     need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride", "needs model.gait_phase (a stride head to train)")
     need(t.w_g_rec == 0 or m.gait_phase, "train.w_g_rec", "needs model.gait_phase (a phase to reconstruct at)")
@@ -426,7 +429,7 @@ def small() -> Config:
                           root_height=True),
         train=TrainConfig(batch_size=16, num_steps=7000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
                           w_g_stride=1.0, w_g_floor=5.0, w_g_skate=5.0, w_g_rec=5.0, w_g_root_jerk=1.0,
-                          rec_z="sampled", log_every=50, preview_every=2000, checkpoint_every=1000,
+                          w_g_joint_jerk=1.0, rec_z="sampled", log_every=50, preview_every=2000, checkpoint_every=1000,
                           keep_checkpoints=10),
     )
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -203,3 +204,41 @@ def test_root_jerk_excess_by_hand():
     g = jax.grad(lambda f: losses.root_jerk_excess(f, real_BxTx3))(fake_BxTx3)
     smoother = fake_BxTx3 - 0.01 * g
     assert float(losses.root_jerk_excess(smoother, real_BxTx3)) < float(losses.root_jerk_excess(fake_BxTx3, real_BxTx3))
+
+
+def test_world_joints_and_joint_jerk_excess_by_hand():
+    # Two joints beside the root. The root moves at a constant velocity (v[0] is ignored); in the
+    # fake, joint 1's x row alternates +a, -a about its rest row: its third difference is ±8a at each
+    # of the T - 3 samples, so E‖Δ³x‖² = 64 a² for that joint and 0 for the others. (Binary
+    # fractions throughout, so that the sums are exact and the other joints' jerk exactly 0.)
+    b, t, a, unit = 2, 9, 0.0625, 0.5
+    vel_BxTx3 = jnp.tile(jnp.array([0.125, 0.0, 0.25]), (b, t, 1)).at[:, 0].set(7.0)
+    rest_R = jnp.array([0.0, 0.5, 0.0, 0.125, -0.875, 0.0])
+    real_pose_BxTxR = jnp.tile(rest_R, (b, t, 1))
+    sign_T = jnp.where(jnp.arange(t) % 2 == 0, 1.0, -1.0)
+    fake_pose_BxTxR = real_pose_BxTxR.at[..., 0].add(a * sign_T)
+    x_BxTxJx3 = losses.world_joints(vel_BxTx3, real_pose_BxTxR)
+    chex.assert_shape(x_BxTxJx3, (b, t, 3, 3))
+    root_T = 0.25 * jnp.arange(t)  # z of the root: 0.25 per sample from the origin
+    np.testing.assert_allclose(np.asarray(x_BxTxJx3[0, :, 0, 2]), np.asarray(root_T), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(x_BxTxJx3[1, :, 2, 1]), -0.875, rtol=1e-6)  # root y 0 + row y
+    got = float(losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, real_pose_BxTxR, unit))
+    assert got == pytest.approx(64 * a**2 / unit**2, rel=1e-4)
+    # Each joint is held to its own real counterpart: a real batch jerky in joint 2 does not excuse
+    # the fake's jerk in joint 1, though pooled over joints the real one would be the jerkier.
+    real_jerky_pose = real_pose_BxTxR.at[..., 3].add(2 * a * sign_T)
+    got = float(losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, real_jerky_pose, unit))
+    assert got == pytest.approx(64 * a**2 / unit**2, rel=1e-4)
+    # only the excess counts, no gradient reaches the real batch, and a gradient step lowers it
+    assert float(losses.joint_jerk_excess(vel_BxTx3, real_pose_BxTxR, vel_BxTx3, fake_pose_BxTxR)) == 0.0
+    g_real = jax.grad(lambda p: losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, p))(real_pose_BxTxR)
+    np.testing.assert_array_equal(np.asarray(g_real), 0.0)
+    g = jax.grad(lambda p: losses.joint_jerk_excess(vel_BxTx3, p, vel_BxTx3, real_pose_BxTxR))(fake_pose_BxTxR)
+    assert float(jnp.abs(g[..., 1:]).max()) == 0.0  # only the jerky joint's x row is pushed
+    smoother = fake_pose_BxTxR - 0.01 * g
+    assert (float(losses.joint_jerk_excess(vel_BxTx3, smoother, vel_BxTx3, real_pose_BxTxR))
+            < float(losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, real_pose_BxTxR)))
+    # the root is a joint too: a root shaking along x is paid for like any other joint
+    shaky_vel = vel_BxTx3.at[..., 0].add(a * sign_T)  # Δ³ of the integrated root = Δ² of v = ±4a
+    got = float(losses.joint_jerk_excess(shaky_vel, real_pose_BxTxR, vel_BxTx3, real_pose_BxTxR, unit))
+    assert got == pytest.approx(3 * 16 * a**2 / unit**2, rel=1e-4)  # the root moves all three joints

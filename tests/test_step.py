@@ -480,12 +480,12 @@ GAIT_KEY = jax.random.key(3)
 
 @functools.lru_cache(maxsize=None)
 def _gait_step(rec_z: str):
-    """The gait config with the reconstructed half (z = 0 or as drawn) and the root-jerk term:
+    """The gait config with the reconstructed half (z = 0 or as drawn) and the two jerk terms:
     (cfg, gait targets, batch, initial state, new state, metrics) of one step, compiled once per
     `rec_z` (the "zero" one serves the gait test too)."""
     cfg0, gait = _gait_cfg()
     cfg = validate(dataclasses.replace(cfg0, train=dataclasses.replace(
-        cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0)))
+        cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0, w_g_joint_jerk=1.0)))
     batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
              "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2}
     state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
@@ -546,8 +546,8 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
         validate(dataclasses.replace(gait_cfg, model=dataclasses.replace(gait_cfg.model, gait_phase=False)))
 
 
-def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
-    # The step's g_rec and g_root_jerk recomputed outside it, from G before the update: the first
+def test_reconstructed_half_at_zero_or_sampled_z_and_the_jerk_terms():
+    # The step's g_rec and jerk terms recomputed outside it, from G before the update: the first
     # window asks for its own style at its own phase, with z = 0 or with the z drawn for it.
     from motiongan_jax.data import curves
     from motiongan_jax.motion.representation import LENGTH_UNIT_M
@@ -568,6 +568,9 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_root_jerk_term():
         want_jerk = losses.root_jerk_excess(root_vel, real_vel, LENGTH_UNIT_M)
         assert float(m["g_rec"]) == pytest.approx(float(want_rec), rel=1e-4)
         assert float(m["g_root_jerk"]) == pytest.approx(float(want_jerk), rel=1e-4, abs=1e-9)
+        want_joints = losses.joint_jerk_excess(root_vel, pose, real_vel, batch["pose_BxTxR"], LENGTH_UNIT_M)
+        assert float(want_joints) > 0  # an untrained G is jerkier than the batch somewhere
+        assert float(m["g_joint_jerk"]) == pytest.approx(float(want_joints), rel=1e-4)
         g_rec[rec_z] = float(m["g_rec"])
     assert g_rec["zero"] != pytest.approx(g_rec["sampled"], rel=1e-3)  # the drawn z reaches the half
     cfg0, _ = _gait_cfg()

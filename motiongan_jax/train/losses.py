@@ -112,13 +112,14 @@ def bone_loss(pose_BxTxR: jax.Array, bone_pairs: Sequence[tuple[int, int]], targ
 CONTACT_SOFTNESS_M = 0.01
 
 
-def toe_tracks(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints) -> jax.Array:
-    """World toe positions B x T x K x 3 up to one constant per window: the root integrated from the
-    origin (curves.integrate) plus the toes' root-relative rows (kept-joint indices >= 1)."""
+def world_joints(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
+    """World joint positions B x T x J x 3 (kept-joint order, root first) up to one constant per
+    window: the root integrated from the origin (curves.integrate) plus each joint's root-relative row."""
     b, t, r = pose_BxTxR.shape
     root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), root_vel_BxTx3)
-    rows_BxTxKx3 = pose_BxTxR.reshape(b, t, r // 3, 3)[:, :, np.asarray(toe_joints) - 1]
-    return root_BxTx3[:, :, None, :] + rows_BxTxKx3
+    rows_BxTxJx3 = jnp.concatenate([jnp.zeros((b, t, 1, 3), pose_BxTxR.dtype), pose_BxTxR.reshape(b, t, r // 3, 3)],
+                                   axis=2)
+    return root_BxTx3[:, :, None, :] + rows_BxTxJx3
 
 
 def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, contact_height_m: float,
@@ -134,7 +135,7 @@ def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, co
       end: a toe on the floor stands still, and one that moves must lift (c has a gradient).
     Both reach the whole body, root included (docs/RESULTS.md §10 measures stopping the root's).
     """
-    toes_BxTxKx3 = toe_tracks(root_vel_BxTx3, pose_BxTxR, toe_joints)
+    toes_BxTxKx3 = world_joints(root_vel_BxTx3, pose_BxTxR)[:, :, np.asarray(toe_joints)]
     h_BxTxK = toes_BxTxKx3[..., 1]
     h_BxTxK = h_BxTxK - jnp.min(h_BxTxK, axis=(1, 2), keepdims=True)
     lift_BxT = jnp.min(h_BxTxK, axis=2) / unit
@@ -149,6 +150,19 @@ def root_jerk_excess(fake_vel_BxTx3: jax.Array, real_vel_BxTx3: jax.Array, unit:
     def mean_sq(v_BxTx3):
         return jnp.mean(jnp.sum(jnp.square(jnp.diff(v_BxTx3, n=2, axis=1)), axis=-1))
     return jax.nn.relu(mean_sq(fake_vel_BxTx3) - jax.lax.stop_gradient(mean_sq(real_vel_BxTx3))) / unit**2
+
+
+def joint_jerk_excess(fake_vel_BxTx3: jax.Array, fake_pose_BxTxR: jax.Array, real_vel_BxTx3: jax.Array,
+                      real_pose_BxTxR: jax.Array, unit: float = 1.0) -> jax.Array:
+    """Σ_j max(0, E‖Δ³x_fake,j‖² − E‖Δ³x_real,j‖²) in `unit`s², over the world joints x
+    (world_joints, root included), each against the same joint of the real batch: pooled over
+    joints, the joints smoother than the data would hide the others' excess (docs/RESULTS.md §19)."""
+    def per_joint(vel_BxTx3, pose_BxTxR):
+        jerk_BxTm3xJx3 = jnp.diff(world_joints(vel_BxTx3, pose_BxTxR), n=3, axis=1)
+        return jnp.mean(jnp.sum(jnp.square(jerk_BxTm3xJx3), axis=-1), axis=(0, 1))
+    excess_J = per_joint(fake_vel_BxTx3, fake_pose_BxTxR) - jax.lax.stop_gradient(
+        per_joint(real_vel_BxTx3, real_pose_BxTxR))
+    return jnp.sum(jax.nn.relu(excess_J)) / unit**2
 
 
 def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax.Array:

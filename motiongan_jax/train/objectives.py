@@ -38,10 +38,11 @@ def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, 
 
 def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, curve_BxTx3,
              bone_pairs, bone_lengths_m, train_cfg, length_unit: float, *, log_stride_B=None,
-             gait=None, real_vel_BxTx3=None) -> dict[str, jax.Array]:
+             gait=None, real_vel_BxTx3=None, real_pose_BxTxR=None) -> dict[str, jax.Array]:
     """G's loss terms (one D call). Curve, bone and foot losses are in units of length_unit.
     The gait terms (train.w_g_stride, w_g_floor, w_g_skate) need `gait`, the stride term also
-    G's `log_stride_B`, the root jerk term (train.w_g_root_jerk) the real batch's root velocity."""
+    G's `log_stride_B`, the root jerk term (train.w_g_root_jerk) the real batch's root velocity,
+    the joint jerk term (train.w_g_joint_jerk) its root velocity and pose."""
     t = train_cfg
     adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True, labels_B=fake_labels_B)
     adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
@@ -58,6 +59,10 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, c
     if t.w_g_root_jerk:
         terms["g_root_jerk"] = losses.root_jerk_excess(fake_vel_BxTx3, real_vel_BxTx3, length_unit)
         total = total + t.w_g_root_jerk * terms["g_root_jerk"]
+    if t.w_g_joint_jerk:
+        terms["g_joint_jerk"] = losses.joint_jerk_excess(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3,
+                                                         real_pose_BxTxR, length_unit)
+        total = total + t.w_g_joint_jerk * terms["g_joint_jerk"]
     if t.w_g_stride:
         terms["g_stride"] = losses.stride_loss(log_stride_B, fake_labels_B, gait.stride_m_C)
         total = total + t.w_g_stride * terms["g_stride"]

@@ -123,7 +123,8 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
             terms = g_losses(d, *fake_out[:2], fake_labels, curve, bone_pairs, bone_lengths, tcfg,
-                             LENGTH_UNIT_M, log_stride_B=fake_out[2], gait=gait, real_vel_BxTx3=real_vel)
+                             LENGTH_UNIT_M, log_stride_B=fake_out[2], gait=gait, real_vel_BxTx3=real_vel,
+                             real_pose_BxTxR=real_pose)
             if rec_half:
                 h = rec_half
                 terms["g_rec"] = losses.reconstruction_loss(fake_out[0][:h], fake_out[1][:h], real_vel[:h],
