@@ -131,7 +131,8 @@ def test_a_run_config_written_before_the_compute_section_loads_as_the_small_pres
     assert old["name"] == "cpu" and old["model"]["d_cond"] == "projection" and "conv_impl" in old["model"]
     cfg = C.from_dict(old)
     # fields added since take the values that keep the run's behaviour, not the preset's new ones
-    assert cfg == C.override(C.small(), ["train.num_steps=300", "train.w_g_root_jerk=0", "train.rec_z=zero"])
+    assert cfg == C.override(C.small(), ["train.num_steps=300", "train.w_g_root_jerk=0", "train.w_g_joint_jerk=0",
+                                        "train.rec_z=zero"])
     assert C.to_dict(C.from_dict(C.to_dict(cfg))) == C.to_dict(cfg)  # the new schema round-trips
     # the saved hash is the old dict's; the same config in the new schema hashes differently
     assert meta["config_hash"] == C.config_hash(old) != C.config_hash(cfg)
