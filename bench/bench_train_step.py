@@ -2,7 +2,7 @@
 """Training-step benchmark (run by hand, never in CI). Prints medians.
 
 Times one jitted train_step (D update then G update, state donated) on synthetic batches of the
-right shapes: the paper's (B 24, T 128, CMU skeleton 27 joints -> 81 rows, 28 styles, top 64) and
+right shapes: the paper's (B 24, T 128, CMU skeleton 27 joints -> 81 rows, 28 styles, 64 base channels) and
 the small config's. Reports compile time, median wall and process-CPU seconds per step, the load
 average (the machine is shared: compare runs taken close together) and XLA's flop count of the
 compiled step. Reference PyTorch on this machine kind, 2 threads: median 8.57 s per iteration
@@ -106,7 +106,8 @@ def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     med = statistics.median(times)
-    print(f"{name} [{impl}, {dtype}]: B {B}, T {T}, rows {layout.num_rows}, {num_styles} styles, top {cfg.model.top}: "
+    print(f"{name} [{impl}, {dtype}]: B {B}, T {T}, rows {layout.num_rows}, {num_styles} styles, "
+          f"base channels {cfg.model.base_channels}: "
           f"compile {compile_s:.1f} s; step median {med:.3f} s (min {min(times):.3f}, max {max(times):.3f}, "
           f"{repeats} runs; process CPU {statistics.median(cpu):.2f} s); XLA counts {flops / 1e9:.1f} GFLOP "
           f"-> {flops / med / 1e9:.1f} GFLOP/s; {1 / med:.2f} it/s{peak_device_memory()}; {load()}", flush=True)

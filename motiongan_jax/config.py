@@ -81,10 +81,11 @@ class DataConfig:
 class ModelConfig:
     """The networks. Every option below departs from the paper only when on (True, or its
     non-paper value); the small presets turn them on (docs/RESULTS.md §5-§10 measured each)."""
-    # Channel base ("top" in the reference): G's first conv width, D's first conv width.
-    top: int = 64
-    # Kernel width along time.
-    kw: int = 5
+    # Channel base ("top" in the reference): the channels of G's first encoder conv and of D's
+    # first conv; the other layers' are multiples of it.
+    base_channels: int = 64
+    # Kernel size along time of every conv of G and D (odd: the padding keeps T).
+    time_kernel: int = 5
     w_dim: int = 64
     z_dim: int = 64
     # Latent Transform init: "paper" (w ~ 2e-5 at init, as the reference) or "torch_default"
@@ -280,8 +281,8 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
     need(d.data_dir is not None or d.label_rule == "synthetic" or not need_data, "data.data_dir",
          f"label rule {d.label_rule!r} needs a data directory (--data DIR); only 'synthetic' has a default")
     need(len(set(d.styles)) == len(d.styles), "data.styles", "duplicate style names")
-    need(m.top >= 1 and m.top % 1 == 0, "model.top", "must be a positive integer")
-    need(m.kw >= 1 and m.kw % 2 == 1, "model.kw", "must be odd")
+    need(m.base_channels >= 1, "model.base_channels", "must be a positive integer")
+    need(m.time_kernel >= 1 and m.time_kernel % 2 == 1, "model.time_kernel", "must be odd")
     need(m.w_dim >= 1 and m.z_dim >= 1, "model.w_dim", "w_dim and z_dim must be positive")
     need(t.batch_size >= 1, "train.batch_size", "must be >= 1")
     need(t.num_steps >= 1, "train.num_steps", "must be >= 1")
@@ -317,8 +318,9 @@ BOOLEANISED = {
     "model": {"output_prior": {"none": False, "rest_and_curve": True},
               "d_cond": {"none": False, "projection": True}},
 }
-# Fields that moved to another section: (old section, name) -> new section.
-MOVED = {("model", "conv_impl"): "compute", ("model", "compute_dtype"): "compute"}
+# Fields that moved to another section or took a clearer name: (old section, old name) -> (section, name).
+MOVED = {("model", "conv_impl"): ("compute", "conv_impl"), ("model", "compute_dtype"): ("compute", "compute_dtype"),
+         ("model", "top"): ("model", "base_channels"), ("model", "kw"): ("model", "time_kernel")}
 # Presets that were renamed: old config name -> new.
 RENAMED_PRESETS = {"cpu": "small", "bandai_cpu": "bandai_small"}
 
@@ -326,14 +328,14 @@ RENAMED_PRESETS = {"cpu": "small", "bandai_cpu": "bandai_small"}
 def upgrade(d: dict) -> dict:
     """A saved config dict (to_dict's form, from any earlier version) in this version's schema:
     retired options at their only value dropped, string options that became booleans mapped,
-    moved fields in their new section, renamed presets under their new name. ConfigError for a
+    moved or renamed fields in their new place, renamed presets under their new name. ConfigError for a
     saved config that used a retired option, or an old string value that has no boolean."""
     out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in d.items()}
     out["name"] = RENAMED_PRESETS.get(out.get("name"), out.get("name", "restored"))
-    for (section, name), target in MOVED.items():
+    for (section, name), (new_section, new_name) in MOVED.items():
         values = out.get(section, {})
         if name in values:
-            out.setdefault(target, {}).setdefault(name, values.pop(name))
+            out.setdefault(new_section, {}).setdefault(new_name, values.pop(name))
     for section, retired in RETIRED.items():
         values = out.get(section, {})
         for name, only in retired.items():
@@ -395,7 +397,7 @@ def paper() -> Config:
         name="paper",
         data=DataConfig(label_rule="cmu", styles=PAPER_STYLES, start_offset=1, control_point_interval=256,
                         frame_nums=1024, frame_step=8, window_stride=3, val_modulus=0),
-        model=ModelConfig(top=64, kw=5, w_dim=64, z_dim=64),
+        model=ModelConfig(base_channels=64, time_kernel=5, w_dim=64, z_dim=64),
         train=TrainConfig(batch_size=24, num_steps=200_000, log_every=100, preview_every=5000,
                           checkpoint_every=20_000),
     )
@@ -409,7 +411,7 @@ def bandai() -> Config:
         name="bandai",
         data=DataConfig(label_rule="bandai", units_to_m=0.01, start_offset=0, control_point_interval=64,
                         frame_nums=128, frame_step=2, window_stride=1, val_modulus=4, val_remainder=0),
-        model=ModelConfig(top=64, kw=5, w_dim=64, z_dim=64),
+        model=ModelConfig(base_channels=64, time_kernel=5, w_dim=64, z_dim=64),
         train=TrainConfig(batch_size=24, num_steps=100_000, log_every=100, preview_every=5000,
                           checkpoint_every=10_000),
     )
@@ -418,13 +420,13 @@ def bandai() -> Config:
 def small() -> Config:
     """A smaller model that learns to walk in styles on 2 CPU cores in 19-23 minutes (7,000
     steps), on the embedded dataset (60 fps: a step of 4 gives 15 Hz, T 32 a 2.1 s window); the
-    shipped model. Narrower (top 16) and with the departures from the paper that made it learn,
+    shipped model. Narrower (16 base channels) and with the departures from the paper that made it learn,
     each measured in docs/RESULTS.md (its "The small preset" paragraph lists them by §)."""
     return Config(
         name="small",
         data=DataConfig(label_rule="synthetic", start_offset=1, control_point_interval=128, frame_nums=128,
                         frame_step=4, window_stride=2, val_modulus=5, val_remainder=0),
-        model=ModelConfig(top=16, kw=5, w_dim=32, z_dim=32, output_prior=True, g_frame="curve",
+        model=ModelConfig(base_channels=16, time_kernel=5, w_dim=32, z_dim=32, output_prior=True, g_frame="curve",
                           latent_init="torch_default", d_cond=True, exact_bones=True, gait_phase=True,
                           root_height=True),
         train=TrainConfig(batch_size=16, num_steps=7000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
@@ -442,12 +444,12 @@ def bandai_small() -> Config:
 
 
 def tiny() -> Config:
-    """Tests only: the smallest shapes that exercise every layer (T 16, top 4, batch 2)."""
+    """Tests only: the smallest shapes that exercise every layer (T 16, 4 base channels, batch 2)."""
     return Config(
         name="tiny",
         data=DataConfig(label_rule="synthetic", start_offset=1, control_point_interval=32, frame_nums=64,
                         frame_step=4, window_stride=8, val_modulus=5, val_remainder=0),
-        model=ModelConfig(top=4, kw=5, w_dim=8, z_dim=8),
+        model=ModelConfig(base_channels=4, time_kernel=5, w_dim=8, z_dim=8),
         train=TrainConfig(batch_size=2, num_steps=4, log_every=1, preview_every=0, checkpoint_every=2,
                           keep_checkpoints=2),
     )

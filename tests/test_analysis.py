@@ -161,7 +161,7 @@ def test_w_blend_equals_adain_blend(run):
     scale = float(jnp.abs(outs[0][1]).mean())
     assert float(jnp.abs(outs[0][1] - outs[1][1]).max()) > 0.05 * scale  # the codes change the output
     styles = [jax.jit(adain_lib.adain_styles)(state, ws[i:i + 1]) for i in range(3)]
-    chex.assert_shape(styles[0]["ec0_0"][0], (1, cfg.model.top))
+    chex.assert_shape(styles[0]["ec0_0"][0], (1, cfg.model.base_channels))
     # the override path itself reproduces G exactly
     np.testing.assert_allclose(by_adain_fn(styles[0])[1], outs[0][1], atol=1e-6)
     for weights in ([0.2, 0.5, 0.3], [1.5, -0.25, -0.25]):  # sums to 1, incl. extrapolation

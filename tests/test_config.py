@@ -58,7 +58,7 @@ def test_override_types_and_errors():
     ("data.frame_nums=60", "data.frame_nums"),  # T = 15, not a multiple of 8
     ("data.label_rule=bogus", "data.label_rule"),
     ("data.data_dir=/no/such/dir", "data.data_dir"),
-    ("model.kw=4", "model.kw"),
+    ("model.time_kernel=4", "model.time_kernel"),
     ("train.curve_points=3", "train.curve_points"),
     ("compute.conv_impl=cudnn", "compute.conv_impl"),
     ("compute.compute_dtype=float16", "compute.compute_dtype"),
@@ -88,6 +88,19 @@ def test_saved_configs_with_a_retired_option_off_still_load():
         from_dict(d)
 
 
+def test_saved_configs_with_the_old_field_names_load_under_the_new_ones():
+    """model.top and model.kw, as every config saved before their rename holds them, load as
+    model.base_channels and model.time_kernel; the dict keeps the hash it was saved with."""
+    old = C.to_dict(C.tiny())
+    model = old["model"]
+    old["model"] = {"top": 12, "kw": 3, **{k: v for k, v in model.items() if k not in ("base_channels", "time_kernel")}}
+    saved_hash = C.config_hash(old)
+    cfg = C.from_dict(old)
+    assert (cfg.model.base_channels, cfg.model.time_kernel) == (12, 3)
+    assert cfg == C.override(C.tiny(), ["model.base_channels=12", "model.time_kernel=3"])
+    assert "top" in old["model"] and C.config_hash(old) == saved_hash  # upgrade copies, never edits
+
+
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 
 
@@ -98,7 +111,7 @@ def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_docum
         assert make().name == name
     paper, small = C.paper().model, C.small().model
     # the small model turns every model option on; the paper's keeps every default
-    assert paper == C.ModelConfig(top=64, kw=5, w_dim=64, z_dim=64)
+    assert paper == C.ModelConfig(base_channels=64, time_kernel=5, w_dim=64, z_dim=64)
     assert (small.output_prior, small.d_cond, small.exact_bones, small.gait_phase, small.root_height,
             small.g_frame, small.latent_init) == (True, True, True, True, True, "curve", "torch_default")
     assert C.bandai_small().model == small and C.bandai_small().data.frame_nums == 64

@@ -265,7 +265,7 @@ def _curvy_batch(B, T, R, key):
 
 
 STEP_T = 32
-STEP_CFG = validate(Config(data=DataConfig(frame_nums=STEP_T, frame_step=1), model=ModelConfig(top=8),
+STEP_CFG = validate(Config(data=DataConfig(frame_nums=STEP_T, frame_step=1), model=ModelConfig(base_channels=8),
                            train=TrainConfig(batch_size=2)))
 
 

@@ -34,7 +34,7 @@ class Layout(NamedTuple):  # the part of representation.RowLayout that step.py r
 
 LAYOUT = Layout(3 * J, tuple((max(k - 2, 0) if k % 2 else k - 1, k) for k in range(1, J + 1)),
                 np.linspace(0.05, 0.4, J).astype(np.float32))
-CFG = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(top=8),
+CFG = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelConfig(base_channels=8),
                       train=TrainConfig(batch_size=B)))
 
 
@@ -237,7 +237,7 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
-                                model=ModelConfig(top=4, w_dim=8, z_dim=8)))
+                                model=ModelConfig(base_channels=4, w_dim=8, z_dim=8)))
     prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior=True))
     # the modules themselves (eager, no compile): same key, same parameters
     rows = train_state.output_prior_rows(prior_cfg.model, layout)
@@ -269,7 +269,7 @@ def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     world_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
-                                model=ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True)))
+                                model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True)))
     curve_cfg = dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="curve"))
     rows = train_state.output_prior_rows(world_cfg.model, layout)
     world = train_state._build_g(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
@@ -307,9 +307,9 @@ EMA_DECAY = 0.75
 @pytest.fixture(scope="module")
 def projection_ema():
     """(paper config, its variant with a projection D and G's moving average, that variant's
-    initial state and compiled step) at top 4: one program for the projection and the
+    initial state and compiled step) at 4 base channels: one program for the projection and the
     moving-average tests, whose options do not interact."""
-    plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, top=4)))
+    plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, base_channels=4)))
     cfg = validate(dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, d_cond=True),
                                        train=dataclasses.replace(plain_cfg.train, g_ema_decay=EMA_DECAY)))
     state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
@@ -374,7 +374,7 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
     np.testing.assert_allclose(np.asarray(project_bones(rest, bones)), np.asarray(rest), atol=1e-6)
     # a model with exact bones: any w, any curve, every bone has the skeleton's length
     cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
-                          model=ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True, exact_bones=True)))
+                          model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True, exact_bones=True)))
     g = train_state._build_g(cfg.model, layout.num_rel_joints, C, train_state.output_prior_rows(cfg.model, layout),
                           jax.random.key(1), bones=train_state.generator_bones(cfg.model, layout))
     vel = jax.random.normal(jax.random.key(2), (B, T, 3)) * jnp.array([0.1, 0.0, 0.1])
@@ -416,7 +416,7 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     from motiongan_jax.data import curves
     from motiongan_jax.nn.walker import PHASE_CHANNELS
 
-    base = ModelConfig(top=4, w_dim=8, z_dim=8, output_prior=True, g_frame="curve")
+    base = ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True, g_frame="curve")
     plain = train_state._build_g(base, J, C, None, jax.random.key(3))
     g = train_state._build_g(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
     p_plain = dict(nnx.to_flat_state(nnx.state(plain, nnx.Param)))
@@ -451,7 +451,7 @@ def test_root_height_head_gives_the_velocity_as_a_difference():
     """model.root_height: G's vertical velocity is the difference of its root head's y channel
     (v[0] = v[1], the velocity convention), so integrating it gives that height back up to a
     constant; x and z are the velocity head's, as without the option."""
-    base = ModelConfig(top=4, w_dim=8, z_dim=8)
+    base = ModelConfig(base_channels=4, w_dim=8, z_dim=8)
     g_vel = train_state._build_g(base, J, C, None, jax.random.key(3))
     g_h = train_state._build_g(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
     vel = 0.1 * jax.random.normal(jax.random.key(1), (B, T, 3))
@@ -469,7 +469,7 @@ def _gait_cfg():
     from motiongan_jax.data.dataset import GaitTargets
 
     cfg = validate(dataclasses.replace(
-        CFG, model=dataclasses.replace(CFG.model, top=4, g_frame="curve", gait_phase=True, root_height=True,
+        CFG, model=dataclasses.replace(CFG.model, base_channels=4, g_frame="curve", gait_phase=True, root_height=True,
                                        latent_init="torch_default"),
         train=dataclasses.replace(CFG.train, w_g_stride=1.0, w_g_floor=1.0, w_g_skate=1.0)))
     return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), contact_height_m=0.02, toe_joints=(4, 9))

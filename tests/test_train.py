@@ -173,7 +173,7 @@ def test_incompatible_checkpoint_is_refused(unbroken, tiny, tmp_path):
 
     shutil.copytree(unbroken / "checkpoints", tmp_path / "checkpoints")
     with pytest.raises(checkpoint.CheckpointError, match="incompatible"):
-        train_lib.train(override(tiny, ["model.top=8", "train.num_steps=6"]), tmp_path, progress=False,
+        train_lib.train(override(tiny, ["model.base_channels=8", "train.num_steps=6"]), tmp_path, progress=False,
                         log=lambda s: None)
 
 
@@ -185,7 +185,8 @@ def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
     assert other.model == tiny.model
     checkpoint.check_compatible(meta, {"model": to_dict(other)["model"]}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
-        checkpoint.check_compatible(meta, {"model": to_dict(override(tiny, ["model.top=8"]))["model"]}, "here")
+        wider = to_dict(override(tiny, ["model.base_channels=8"]))["model"]
+        checkpoint.check_compatible(meta, {"model": wider}, "here")
     # a checkpoint from before the frame and bone options: those fields are absent from its meta
     # and mean their defaults; a run with another value is refused
     older = {k: v for k, v in meta["model"].items() if k not in ("g_frame", "exact_bones")}
@@ -247,10 +248,10 @@ def test_repeated_set_flags_all_apply(repo, capsys):
     """`--set a=1 --set b=2` applies both (the first was once silently dropped)."""
     cli = load_cli("train")
     base = ["--config", str(repo / "configs" / "tiny.py"), "--workdir", "unused", "--dry-run"]
-    assert cli.main(base + ["--set", "data.frame_nums=60", "--set", "model.top=4"]) == 2
+    assert cli.main(base + ["--set", "data.frame_nums=60", "--set", "model.base_channels=4"]) == 2
     assert "data.frame_nums" in capsys.readouterr().err
-    assert cli.main(base + ["--set", "model.top=4", "model.kw=4", "--set", "model.w_dim=8"]) == 2
-    assert "model.kw" in capsys.readouterr().err
+    assert cli.main(base + ["--set", "model.base_channels=4", "model.time_kernel=4", "--set", "model.w_dim=8"]) == 2
+    assert "model.time_kernel" in capsys.readouterr().err
 
 
 def _log_records(acc_of_step, last=7000, every=50):

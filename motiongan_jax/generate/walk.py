@@ -6,7 +6,7 @@ motions x samples). G instance-normalises over its whole time axis, so a curve u
 goes through in one pass (the statistics span the whole curve, not a training window: DESIGN.md
 §5.1); a longer one goes through in overlapping chunks of CHUNK_T samples, blended by
 overlap-add: each chunk's weight is 0 within CHUNK_MARGIN samples of its ends (more than G's
-receptive radius, about 100 samples at kw 5: the layers' half-widths times their strides, so
+receptive radius, about 100 samples at a time kernel of 5: the layers' half-widths times their strides, so
 what a chunk's zero padding reaches is not used),
 rises linearly over CHUNK_FADE samples, and the weights are normalised to sum 1. Each chunk's
 statistics are its own 4.5 minutes instead of the whole walk's: tests/test_generate.py

@@ -2,7 +2,7 @@
 
 Input (B x T x 81 x 2, NHWC): channel 0 is the root velocity tiled across the rows (each
 joint's xyz triple sees the root's xyz), channel 1 the pose rows. c = `base_channels`
-(model.top), kt the time kernel.
+(model.base_channels), kt the time kernel (model.time_kernel).
 
     c0_0  SN-conv kt×3 /(2,3)   2 -> c    T/2  × 27
     c1_0  SN-conv kt×3 /(2,3)   c -> 2c   T/4  × 9    (`features`)

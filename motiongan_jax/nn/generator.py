@@ -3,7 +3,8 @@
 Layout NHWC = (B, T, W, C). The input velocity B x T x 3 enters as one channel over 3 width
 rows. Every block is conv -> LeakyReLU -> AdaIN(w); the same w feeds all 14 AdaINs. The two
 heads have neither. Skips are taken after AdaIN and tiled along the width, encoder first.
-The reference's unused `dc0_1` is not built. c = `base_channels` (model.top), kt the time kernel.
+The reference's unused `dc0_1` is not built. c = `base_channels`, kt the time kernel
+(model.base_channels, model.time_kernel).
 
     ec0_0  conv kt×1                 1 -> c    T     × 3
     ec1_0  conv kt×3 /(2,3)          c -> 2c   T/2   × 1

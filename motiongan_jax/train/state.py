@@ -81,7 +81,7 @@ def _build_g(model_cfg, num_rel_joints: int, num_styles: int, rest_pose_R, key, 
              dtype: str = "float32", bones=None) -> Generator:
     """The paper's G, or the walker around it when the model section asks for any of its options."""
     m = model_cfg
-    paper = dict(base_channels=m.top, kt=m.kw, w_dim=m.w_dim, z_dim=m.z_dim, num_styles=num_styles,
+    paper = dict(base_channels=m.base_channels, kt=m.time_kernel, w_dim=m.w_dim, z_dim=m.z_dim, num_styles=num_styles,
                  latent_init=m.latent_init, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype,
                  rngs=nnx.Rngs(key))
     if not (m.output_prior or m.g_frame != "world" or bones is not None or m.gait_phase or m.root_height):
@@ -94,8 +94,9 @@ def _build_d(model_cfg, seq_len: int, num_rel_joints: int, num_styles: int, key,
              dtype: str = "float32") -> Discriminator:
     """The paper's D, or with model.d_cond its projection variant."""
     build = ProjectionDiscriminator if model_cfg.d_cond else Discriminator
-    return build(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.top,
-                 kt=model_cfg.kw, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype, rngs=nnx.Rngs(key))
+    return build(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.base_channels,
+                 kt=model_cfg.time_kernel, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype,
+                 rngs=nnx.Rngs(key))
 
 
 def build_models(cfg, num_rel_joints: int, num_styles: int, key: jax.Array, layout=None, *,
