@@ -1,4 +1,4 @@
-"""Export BVH files as world joint positions (metres, Y up) in one .npz for your own code.
+"""BVH files as world joint positions (metres, Y up) in one .npz for your own code.
 
   python bin/prepare_data.py DATA_DIR --out FILE.npz [--labels paper|bandai|cmu]
 
@@ -11,7 +11,7 @@ import sys
 
 from motiongan_jax.config import LabelRule, choices
 from motiongan_jax.data.dataset import DataError
-from motiongan_jax.data.export import export_positions
+from motiongan_jax.data.positions_npz import write_positions_npz
 from motiongan_jax.motion.bvh import BVHError
 
 
@@ -25,7 +25,7 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-bad", action="store_true", help="report malformed files and go on with the rest")
     args = ap.parse_args(argv)
     try:
-        info = export_positions(args.data_dir, args.out, args.labels, args.units_to_m, args.skip_bad,
+        info = write_positions_npz(args.data_dir, args.out, args.labels, args.units_to_m, args.skip_bad,
                                 log=lambda s: print(s, file=sys.stderr))
     except (BVHError, DataError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -1,4 +1,5 @@
-"""Export preprocessed motion for users' own code: world joint positions of every joint, metres."""
+"""A folder of BVH files as one .npz of world joint positions (every joint, metres, Y up) for users'
+own code: what bin/prepare_data.py writes and analysis.clips.load_motion reads back."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ from motiongan_jax.motion import bvh, kinematics
 from motiongan_jax.motion.representation import UNITS_TO_M
 
 
-def export_positions(data_dir: str | Path, out: str | Path, labels: str = "paper",
-                     units_to_m: float | None = None, skip_bad: bool = False, log=print) -> dict:
+def write_positions_npz(data_dir: str | Path, out: str | Path, labels: str = "paper",
+                        units_to_m: float | None = None, skip_bad: bool = False, log=print) -> dict:
     """Read every BVH under data_dir and write one .npz (see bin/prepare_data.py --help).
 
     Nothing is written unless every file (or, with skip_bad, every good file) was read.
