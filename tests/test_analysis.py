@@ -125,15 +125,15 @@ def test_style_codes_and_gait_parameters(run):
     _, state, meta, cfg, _ = run
     names = meta["style_names"]
     codes = style_space.label_codes(state, names, k=3, key=jax.random.key(2))
-    W = cfg.model.w_dim
-    chex.assert_shape(codes.zero_CxD, (len(names), W))
-    chex.assert_shape(codes.samples_CxKxD, (len(names), 3, W))
+    D = cfg.model.w_dim
+    chex.assert_shape(codes.zero_CxD, (len(names), D))
+    chex.assert_shape(codes.samples_CxKxD, (len(names), 3, D))
     labels = jnp.arange(len(names))
     np.testing.assert_allclose(codes.zero_CxD, inference.generator(state).style(
         labels, jnp.zeros((len(names), cfg.model.z_dim))), rtol=1e-5, atol=1e-9)
     z = jax.random.normal(jax.random.key(5), (len(names), cfg.model.z_dim))
     w = styles_lib.latent_codes(state, labels, z)
-    chex.assert_shape(w, (len(names), W))
+    chex.assert_shape(w, (len(names), D))
     np.testing.assert_allclose(w, inference.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
     assert not np.allclose(w, codes.zero_CxD)  # z reaches w
     gait = probe_lib.gait_parameters(meta, cfg)
@@ -149,11 +149,11 @@ def test_style_codes_and_gait_parameters(run):
 
 def test_w_blend_equals_adain_blend(run):
     _, state, meta, cfg, _ = run
-    T, W = 64, cfg.model.w_dim  # the shapes of the search tests: their compiled G is reused
+    T, D = 64, cfg.model.w_dim  # the shapes of the search tests: their compiled G is reused
     curve = jnp.cumsum(jax.random.normal(jax.random.key(0), (1, T, 3)).at[..., 1].set(0), axis=1)
     vel = np.asarray(curves.velocity(curve))
     # codes far apart (|w| ~ 1, not the ~1e-5 codes of a 4-step model), so that they matter
-    ws = jax.random.normal(jax.random.key(1), (3, W))
+    ws = jax.random.normal(jax.random.key(1), (3, D))
     by_w_fn = lambda w: walk.apply_code(state, vel, w)  # noqa: E731
     adain_fn = jax.jit(adain_lib.generator_apply_adain)
     by_adain_fn = lambda adain: adain_fn(state, vel, adain)  # noqa: E731

@@ -210,7 +210,7 @@ def test_spectral_norm_no_gradient_into_u_v():
     for leaf in jax.tree_util.tree_leaves(g_sn):
         np.testing.assert_array_equal(np.asarray(leaf), 0.0)
     assert float(jnp.abs(g_params["kernel"][...]).sum()) > 0
-    # dσ/dW = u vᵀ, as in PyTorch (u, v are constants)
+    # dσ/dM = u vᵀ for the weight matrix M, as in PyTorch (u, v are constants)
     w = jnp.asarray(np.random.default_rng(1).normal(size=(4, 30)), jnp.float32)
     sn_mod = conv.sn
     grad_w = jax.grad(lambda w: sn_mod(w, update_stats=False))(w)

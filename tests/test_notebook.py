@@ -98,18 +98,18 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     assert ns["WORKDIR"] is None and ns["cfg"].name == "small" == from_dict(shipped.meta["config"]).name
     assert int(ns["state"].step) == shipped.provenance["steps"]
     names, codes = ns["names"], ns["codes"]
-    C, W = codes.zero_CxD.shape
-    assert C == len(names) and W == ns["cfg"].model.w_dim
+    C, D = codes.zero_CxD.shape
+    assert C == len(names) and D == ns["cfg"].model.w_dim
 
     # PCA: ratios of the total variance, non-negative, sorted, summing to <= 1
     evr = np.asarray(ns["evr"], np.float64)
-    chex.assert_shape(evr, (min(C * ns["K"], W),))
+    chex.assert_shape(evr, (min(C * ns["K"], D),))
     assert np.all(evr >= -1e-7) and np.all(np.diff(evr) <= 1e-7) and evr.sum() <= 1 + 1e-5
     assert evr[0] > 0
 
     # interpolation: five codes from w_A to w_B, the same codes as the mix syntax
     w_ab, w_interp, T = ns["w_ab"], ns["w_interp"], len(ns["curve_T"])
-    chex.assert_shape(w_interp, (len(ns["alphas"]), W))
+    chex.assert_shape(w_interp, (len(ns["alphas"]), D))
     np.testing.assert_allclose(w_interp[[0, -1]], w_ab, rtol=1e-6, atol=1e-7)
     scale = float(np.abs(w_ab).max())
     assert scale > 1e-3  # styles differ
@@ -128,7 +128,7 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     # style search on a held-out clip of the embedded dataset: the loss went down from the start
     assert Path(ns["clip"]).name == "OldMan_05.bvh"
     res = ns["res"]
-    chex.assert_shape(res.w_D, (W,))
+    chex.assert_shape(res.w_D, (D,))
     assert np.isfinite(res.final_loss_S).all()
     assert res.loss < res.initial_loss_S[res.best_start]
     assert res.loss == pytest.approx(float(res.final_loss_S.min()))

@@ -154,12 +154,12 @@ def _l2_normalize(x: jax.Array, eps: float = SN_EPS) -> jax.Array:
 
 
 class SpectralNorm(nnx.Module):
-    """σ(W) by power iteration with PyTorch's `spectral_norm` semantics.
+    """σ(M) by power iteration with PyTorch's `spectral_norm` semantics.
 
-    W is the weight as a (out, in·kt·kwidth) matrix in PyTorch order. u (out,) and v (in·kt·kwidth,) start
+    M is the weight as a (out, in·kt·kwidth) matrix in PyTorch order. u (out,) and v (in·kt·kwidth,) start
     as normalised N(0, 1) draws. With `update_stats=True` one iteration runs:
-    v ← normalize(Wᵀu), u ← normalize(Wv), both stored. σ = uᵀWv; no gradient flows into u or v,
-    so dσ/dW = u vᵀ as in PyTorch. The caller divides its raw weight by σ; the raw weight is
+    v ← normalize(Mᵀu), u ← normalize(Mv), both stored. σ = uᵀMv; no gradient flows into u or v,
+    so dσ/dM = u vᵀ as in PyTorch. The caller divides its raw weight by σ; the raw weight is
     never written.
     """
 
@@ -212,7 +212,7 @@ class Conv(nnx.Module):
         self.sn = SpectralNorm(out_ch, in_ch * kt * kwidth, rngs=rngs) if spectral_norm else None
 
     def weight(self, *, update_stats: bool = False) -> jax.Array:
-        """The kernel actually applied (W/σ under spectral norm)."""
+        """The kernel actually applied (kernel / σ under spectral norm)."""
         kernel = self.kernel[...]
         if self.sn is None:
             return kernel
