@@ -388,7 +388,7 @@ def config_hash(cfg: Config | dict) -> str:
 def paper() -> Config:
     """Exactly the paper: CMU styled walks (subjects 137 and 142), 28 styles, B 24, T 128, 200k
     steps. The CMU trials are not shipped (pass --data DIR, files named like 137_04.bvh); far too
-    slow for a CPU (~8.6 s per step on 2 cores): run it on a GPU."""
+    slow for a CPU (its step time: docs/PERFORMANCE.md): run it on a GPU."""
     from motiongan_jax.data.dataset import (
         PAPER_STYLES,  # data imports jax: only when this preset is asked for
     )
@@ -418,10 +418,11 @@ def bandai() -> Config:
 
 
 def small() -> Config:
-    """A smaller model that learns to walk in styles on 2 CPU cores in 19-23 minutes (7,000
-    steps), on the embedded dataset (60 fps: a step of 4 gives 15 Hz, T 32 a 2.1 s window); the
-    shipped model. Narrower (16 base channels) and with the departures from the paper that made it learn,
-    each measured in docs/RESULTS.md (its "The small preset" paragraph lists them by §)."""
+    """A smaller model that learns to walk in styles on 2 CPU cores (7,000 steps; the README gives
+    its training time), on the embedded dataset (60 fps: a step of 4 gives 15 Hz, T 32 a 2.1 s
+    window); the shipped model. Narrower (16 base channels) and with the departures from the paper
+    that made it learn, each measured in docs/RESULTS.md (its "The small preset" paragraph lists
+    them by §)."""
     return Config(
         name="small",
         data=DataConfig(label_rule="synthetic", start_offset=1, control_point_interval=128, frame_nums=128,

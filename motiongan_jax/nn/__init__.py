@@ -21,10 +21,10 @@ def count_params(module: nnx.Module) -> int:
     return sum(int(x.size) for x in jax.tree_util.tree_leaves(nnx.state(module, nnx.Param)))
 
 
-# Initialisation is ~100 separate threefry draws, and XLA's CPU backend spends most of a minute
-# optimising them (each draw is unrolled code). The init runs once, so it is compiled with the
-# backend optimiser off: 4-5x faster to compile, same random bits (threefry is integer code;
-# the float maps to normal/uniform may differ from an eager init in the last place).
+# Initialisation is ~100 separate threefry draws, and XLA's CPU backend spends long optimising
+# them (each draw is unrolled code). The init runs once, so it is compiled with the backend
+# optimiser off: much faster to compile, same random bits (threefry is integer code; the float
+# maps to normal/uniform may differ from an eager init in the last place).
 _FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
 
 

@@ -155,7 +155,8 @@ def weight_grad(xp_BxTxWxC: jax.Array, dy_BxToxWoxO: jax.Array, kt: int, kw: int
     n = _chunk(b, (a_shape.size + b_shape.size) * xp_BxTxWxC.dtype.itemsize)
     axes = (0, 1, 2)
 
-    narrow_first = b_shape.shape[-1] * 4 < a_shape.shape[-1]  # measured: e.g. c_traj 3x faster
+    # the narrow matrix first when it is much narrower (c_traj's weight gradient: bench/bench_conv.py)
+    narrow_first = b_shape.shape[-1] * 4 < a_shape.shape[-1]
 
     def chunk_grad(xc, dyc):
         a, m = _weight_grad_matrices(xc, dyc, kt, kw, stride, plan)
@@ -181,8 +182,8 @@ def weight_grad(xp_BxTxWxC: jax.Array, dy_BxToxWoxO: jax.Array, kt: int, kw: int
 def _fold_width(x, kernel, stride, padding):
     """Disjoint width groups (kernel width = width stride, or one output column, no width
     padding) folded into the channels: (x, kernel, stride) of an equal kt x 1 convolution, or
-    None. D's convs, ec1_0 and c_traj's full-width kernel; XLA's input gradient of c_traj's
-    5 x 81 kernel is otherwise ~0.6 s per step, for 0.03 GFLOP."""
+    None. D's convs, ec1_0 and c_traj's full-width kernel, whose input gradient XLA runs far below
+    its few FLOPs otherwise (docs/PERFORMANCE.md, "Faster work")."""
     kt, kw, cin, cout = kernel.shape
     b, t, w, c = x.shape
     wo = _out_size(w + sum(padding[1]), kw, stride[1])
