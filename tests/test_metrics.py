@@ -476,11 +476,6 @@ def test_interpolation_monotonicity():
     assert M.interpolation_monotonicity(alphas, p) == pytest.approx(expected)
 
 
-def test_agreement():
-    assert M.agreement(np.array([0, 1, 2, 2]), np.array([0, 1, 1, 2])) == pytest.approx(3 / 4)
-    assert M.agreement([5], [5]) == 1.0
-
-
 def test_nearest_centroid():
     centroids = np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]])
     w = jnp.array([[1.0, 1.0], [9.0, -2.0], [2.0, 7.0], [6.0, 6.0], [4.0, 0.0]])
@@ -582,8 +577,6 @@ BAD_INPUTS = [
     (lambda: M.mean_jerk(np.zeros((5, 2, 3)), -1.0), "fps"),
     (lambda: M.interpolation_monotonicity(np.zeros(3), np.zeros(4)), "p_b_N.*length"),
     (lambda: M.interpolation_monotonicity([0.0, np.nan], [1.0, 2.0]), "alphas_N.*NaN"),
-    (lambda: M.agreement(np.zeros(3, int), np.zeros(2, int)), "expected_N.*length"),
-    (lambda: M.agreement(np.zeros(0, int), np.zeros(0, int)), "pred_N.*empty"),
     (lambda: M.nearest_centroid(np.zeros((3, 2)), np.zeros((4, 3))), "centroids_CxD.*size 2"),
     (lambda: M.nearest_centroid_accuracy(np.zeros((3, 2)), np.zeros(2, int), np.zeros((4, 2))), "labels_N.*length"),
     (lambda: M.mean_ci95([]), "values.*empty"),

@@ -138,8 +138,6 @@ _JOINTS: tuple[tuple[str, str | None, tuple[float, float, float], bool], ...] = 
 )
 
 JOINT_NAMES: tuple[str, ...] = tuple(j[0] for j in _JOINTS)
-ZERO_LENGTH_JOINTS = ("LHipJoint", "RHipJoint", "LowerBack", "Neck", "LeftShoulder",
-                      "LeftFingerBase", "LThumb", "RightShoulder", "RightFingerBase", "RThumb")
 _IDX = {n: i for i, n in enumerate(JOINT_NAMES)}
 
 

@@ -481,15 +481,6 @@ def interpolation_monotonicity(alphas_N, p_b_N) -> float:
     return float(scipy.stats.spearmanr(alphas, p_b).statistic)
 
 
-def agreement(pred_N, expected_N) -> float:
-    """Fraction of positions where the prediction equals the expectation (e.g. how often
-    w_A − w_B + w_C is classified as the expected style)."""
-    pred = _int_array(pred_N, "pred_N", 1)
-    expected = _int_array(expected_N, "expected_N", 1)
-    _same_len(pred, "pred_N", expected, "expected_N")
-    return float(np.mean(pred == expected))
-
-
 def nearest_centroid(w_NxD, centroids_CxD) -> np.ndarray:
     """Index (int64, (N,)) of the nearest centroid (Euclidean) for each code; ties go to the
     lower index."""
