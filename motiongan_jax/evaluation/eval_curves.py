@@ -25,6 +25,17 @@ class EvalCurve:
     source: str
 
 
+def _from_origin(curve_Lx3: np.ndarray) -> np.ndarray:
+    """The curve moved on the floor so that it starts at the origin (its dtype kept)."""
+    return curve_Lx3 - curve_Lx3[0] * np.array([1.0, 0.0, 1.0], curve_Lx3.dtype)
+
+
+def _whole_windows(curve_Lx3: np.ndarray, L: int, T: int) -> np.ndarray | None:
+    """The curve's first min(L, a multiple of T) samples, None when it is shorter than T."""
+    n = min(L, len(curve_Lx3) // T * T)
+    return curve_Lx3[:n] if n >= T else None
+
+
 def _heading_change_deg(curve_Lx3) -> float:
     d = np.diff(curve_Lx3[:, [0, 2]], axis=0)
     d = d[np.linalg.norm(d, axis=1) > 1e-9]
@@ -54,8 +65,7 @@ def heldout_curves(val_clips, cfg, L: int, max_curves: int) -> list[EvalCurve]:
             continue
         mw = clips_lib.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=n, frame_step=step,
                                         interval=cfg.data.control_point_interval, max_windows=1)
-        c = np.asarray(mw.curve_NxTx3[0], np.float64)
-        c = c - c[0] * np.array([1.0, 0.0, 1.0])
+        c = _from_origin(np.asarray(mw.curve_NxTx3[0], np.float64))
         kind = "heldout_turning" if _heading_change_deg(c) > TURNING_DEG else "heldout_straight"
         out.append(EvalCurve(Path(clip.source).stem, kind, c.astype(np.float32), clip.source))
         if len(out) >= max_curves:
@@ -75,11 +85,10 @@ def file_curves(paths: Sequence[Path], sample_rate: float, L: int, T: int, contr
             if log:
                 log(f"skipping curve {p}: {err}")
             continue
-        n = min(L, len(arr) // T * T)
-        if n < T:
+        arr = _whole_windows(arr, L, T)
+        if arr is None:
             continue
-        arr = arr[:n] - arr[0] * np.array([1.0, 0.0, 1.0], np.float32)
-        out.append(EvalCurve(Path(p).stem, "cmu", arr.astype(np.float32), str(p)))
+        out.append(EvalCurve(Path(p).stem, "cmu", _from_origin(arr).astype(np.float32), str(p)))
     return out
 
 
@@ -93,19 +102,17 @@ def shape_curves(sample_rate: float, speed: float, L: int, T: int,
         if name == "figure8":
             kw = {"scale": max(length / (4 * math.pi), 1.0)}
         arr = user_curves.prepare_curve(user_curves.load_curve(name, **kw), sample_rate, speed)
-        n = min(L, len(arr) // T * T)
-        if n < T:
+        arr = _whole_windows(arr, L, T)
+        if arr is None:
             continue
-        arr = arr[:n] - arr[0] * np.array([1.0, 0.0, 1.0], np.float32)
-        out.append(EvalCurve(name, "synthetic", arr.astype(np.float32), f"shape:{name}"))
+        out.append(EvalCurve(name, "synthetic", _from_origin(arr).astype(np.float32), f"shape:{name}"))
     return out
 
 
 def long_line(sample_rate: float, speed: float, length_m: float) -> EvalCurve:
     """A straight line of `length_m` metres walked at `speed`: the drift test's curve."""
     arr = user_curves.prepare_curve(user_curves.load_curve("line", length=length_m), sample_rate, speed)
-    arr = arr - arr[0] * np.array([1.0, 0.0, 1.0], np.float32)
-    return EvalCurve(f"line_{length_m:g}m", "long", arr.astype(np.float32), f"shape:line:{length_m:g}m")
+    return EvalCurve(f"line_{length_m:g}m", "long", _from_origin(arr).astype(np.float32), f"shape:line:{length_m:g}m")
 
 
 def median_speed(clips, fps: float) -> float:
