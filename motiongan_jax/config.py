@@ -58,8 +58,7 @@ class DataConfig:
     frame_step: int = 8
     # Frames between consecutive window starts.
     window_stride: int = 3
-    # FPS augmentation: playback-speed factors drawn uniformly (paper: 0.5, 1, 1.5).
-    augment_fps: bool = True
+    # FPS augmentation: playback-speed factors drawn uniformly (paper: 0.5, 1, 1.5); (1.0,) is none.
     fps_factors: tuple[float, ...] = (0.5, 1.0, 1.5)
     # Random rotation about the vertical axis.
     rotate: bool = True
@@ -312,6 +311,7 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
 # options", keeps their record).
 RETIRED = {
     "model": {"phase_wavelengths_m": (), "use_z": "transform", "d_frame": "world", "length_unit": LENGTH_UNIT_M},
+    "data": {"augment_fps": True},
 }
 # String options that became booleans: old value -> new value.
 BOOLEANISED = {

@@ -86,6 +86,12 @@ def test_saved_configs_with_a_retired_option_off_still_load():
     d["model"]["phase_wavelengths_m"] = [1.2]
     with pytest.raises(C.ConfigError, match="model.phase_wavelengths_m.*no longer exists"):
         from_dict(d)
+    d = to_dict(C.load_config(CONFIGS / "tiny.py"))
+    d["data"]["augment_fps"] = True  # FPS augmentation on: what data.fps_factors alone says now
+    assert from_dict(d) == C.load_config(CONFIGS / "tiny.py")
+    d["data"]["augment_fps"] = False
+    with pytest.raises(C.ConfigError, match="data.augment_fps.*no longer exists"):
+        from_dict(d)
 
 
 def test_saved_configs_with_the_old_field_names_load_under_the_new_ones():

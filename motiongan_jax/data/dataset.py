@@ -382,7 +382,7 @@ def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLay
 
 
 def max_step(cfg: DataConfig) -> int:
-    return max(1, int(np.floor(cfg.frame_step * max(cfg.fps_factors if cfg.augment_fps else (1.0,)))))
+    return max(1, int(np.floor(cfg.frame_step * max(cfg.fps_factors))))
 
 
 def _phase_or_none(clip: Clip) -> tuple[np.ndarray, np.ndarray]:
@@ -446,7 +446,7 @@ def epoch_indices(key: jax.Array, step, num_windows: int, batch_size: int) -> ja
 def make_sample_batch(cfg: DataConfig, batch_size: int):
     """Returns sample_batch(arrays, key, step) -> Batch (see docs/CONTRACTS.md). jit it."""
     T = cfg.window_T
-    factors = jnp.asarray(cfg.fps_factors if cfg.augment_fps else (1.0,), jnp.float32)
+    factors = jnp.asarray(cfg.fps_factors, jnp.float32)
     n_max = (T - 1) * max_step(cfg) + 1
 
     def sample_batch(arrays: ClipArrays, key: jax.Array, step) -> dict:
