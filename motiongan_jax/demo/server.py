@@ -27,6 +27,7 @@ from pathlib import Path
 from flask import Flask, jsonify, request, send_from_directory
 from werkzeug.exceptions import HTTPException
 
+from motiongan_jax.cli import add_model_arguments
 from motiongan_jax.data import curves
 from motiongan_jax.demo import engine as engine_lib
 from motiongan_jax.generate import limits
@@ -161,11 +162,7 @@ def _compilation_cache() -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="motiongan-demo", description="Draw a path, pick a style, watch it walk.")
-    src = ap.add_mutually_exclusive_group()
-    src.add_argument("--workdir", default=None, help="a training run's directory (default: the shipped model)")
-    src.add_argument("--model", default=None, help="an export file (bin/export_model.py)")
-    ap.add_argument("--step", type=int, default=None, help="with --workdir: checkpoint step (default: the run's model)")
-    ap.add_argument("--params", choices=("ema", "raw"), default="ema", help="with --workdir: G's parameters")
+    add_model_arguments(ap)
     ap.add_argument("--host", default="127.0.0.1",
                     help="address to listen on (default 127.0.0.1: this machine only)")
     ap.add_argument("--port", type=int, default=8000, help="port (default 8000; 0: any free port)")
