@@ -25,7 +25,7 @@ class EvalCurve:
     source: str
 
 
-def _from_origin(curve_Lx3: np.ndarray) -> np.ndarray:
+def from_origin(curve_Lx3: np.ndarray) -> np.ndarray:
     """The curve moved on the floor so that it starts at the origin (its dtype kept)."""
     return curve_Lx3 - curve_Lx3[0] * np.array([1.0, 0.0, 1.0], curve_Lx3.dtype)
 
@@ -65,7 +65,7 @@ def heldout_curves(val_clips, cfg, L: int, max_curves: int) -> list[EvalCurve]:
             continue
         mw = clips_lib.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=n, frame_step=step,
                                         interval=cfg.data.control_point_interval, max_windows=1)
-        c = _from_origin(np.asarray(mw.curve_NxTx3[0], np.float64))
+        c = from_origin(np.asarray(mw.curve_NxTx3[0], np.float64))
         kind = "heldout_turning" if _heading_change_deg(c) > TURNING_DEG else "heldout_straight"
         out.append(EvalCurve(Path(clip.source).stem, kind, c.astype(np.float32), clip.source))
         if len(out) >= max_curves:
@@ -88,7 +88,7 @@ def file_curves(paths: Sequence[Path], sample_rate: float, L: int, T: int, contr
         arr = _whole_windows(arr, L, T)
         if arr is None:
             continue
-        out.append(EvalCurve(Path(p).stem, "cmu", _from_origin(arr).astype(np.float32), str(p)))
+        out.append(EvalCurve(Path(p).stem, "cmu", from_origin(arr).astype(np.float32), str(p)))
     return out
 
 
@@ -105,14 +105,14 @@ def shape_curves(sample_rate: float, speed: float, L: int, T: int,
         arr = _whole_windows(arr, L, T)
         if arr is None:
             continue
-        out.append(EvalCurve(name, "synthetic", _from_origin(arr).astype(np.float32), f"shape:{name}"))
+        out.append(EvalCurve(name, "synthetic", from_origin(arr).astype(np.float32), f"shape:{name}"))
     return out
 
 
 def long_line(sample_rate: float, speed: float, length_m: float) -> EvalCurve:
     """A straight line of `length_m` metres walked at `speed`: the drift test's curve."""
     arr = user_curves.prepare_curve(user_curves.load_curve("line", length=length_m), sample_rate, speed)
-    return EvalCurve(f"line_{length_m:g}m", "long", _from_origin(arr).astype(np.float32), f"shape:line:{length_m:g}m")
+    return EvalCurve(f"line_{length_m:g}m", "long", from_origin(arr).astype(np.float32), f"shape:line:{length_m:g}m")
 
 
 def median_speed(clips, fps: float) -> float:

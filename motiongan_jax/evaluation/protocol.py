@@ -28,6 +28,7 @@ from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics
 from motiongan_jax.evaluation.eval_curves import (
     EvalCurve,
     file_curves,
+    from_origin,
     heldout_curves,
     long_line,
     median_speed,
@@ -95,8 +96,7 @@ def _real_block(ctx: Context) -> dict:
             continue
         clip = next(cl for cl in ctx.val_clips if cl.source == c.source)
         n = len(c.curve_Lx3)
-        r = np.asarray(clip.root_Fx3, np.float64)[: (n - 1) * step + 1: step]
-        r = r - r[0] * np.array([1.0, 0.0, 1.0])
+        r = from_origin(np.asarray(clip.root_Fx3, np.float64)[: (n - 1) * step + 1: step])
         traj.append({"traj_error_original_m": metrics.trajectory_error_original(r, c.curve_Lx3),
                      "traj_error_symmetric_m": metrics.trajectory_error_symmetric(r, c.curve_Lx3),
                      "endpoint_error_m": metrics.endpoint_error(r, c.curve_Lx3),
