@@ -2,7 +2,7 @@
 """Inference benchmark: G's forward for one walk (run by hand, never in CI). Prints medians.
 
 The paper's G (64 base channels, CMU skeleton: 27 joints -> 81 rows, 28 styles), batch 1, z = 0, the
-Latent Transform included, jitted as generate.py runs it (`step.generator_apply`). Lengths:
+Latent Transform included, jitted as generate.py runs it (`train.inference.generator_apply`). Lengths:
 T 128 (one training window), T 1024, and a 2-minute walk in one call (15 samples/s, the paper's
 120 fps / frame step 8: T 1800). Compile time is reported separately from the run time. The
 2-minute path is also timed through `walk_lib.generate_motion` (G + root integration + joint
