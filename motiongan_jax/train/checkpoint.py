@@ -130,7 +130,6 @@ def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
 def abstract_model(meta: dict):
     """(cfg, layout, abstract train state) that a checkpoint's (or an export's) meta describes:
     the state's shapes and dtypes (jax.ShapeDtypeStruct leaves) and its graph definitions."""
-    from motiongan_jax.config import from_dict
     from motiongan_jax.motion.representation import layout_from_parents
     from motiongan_jax.train import state as train_state
 
