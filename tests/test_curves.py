@@ -267,6 +267,20 @@ def test_rotate_y_is_the_reference_matrix_on_row_vectors():
         atol=1e-6)
 
 
+def test_rotate_rows_y_turns_every_joint_triple_by_its_samples_angle():
+    pose_BxTxR = np.asarray(jax.random.normal(jax.random.key(2), (2, 3, 12)), np.float64)  # 4 joints
+    th_BxT = np.array([[0.0, 0.4, 1.1], [2.0, -0.7, 3.0]])
+    got = np.asarray(curves.rotate_rows_y(pose_BxTxR, th_BxT))
+    for b in range(2):
+        for t in range(3):
+            c, s = math.cos(th_BxT[b, t]), math.sin(th_BxT[b, t])
+            R = np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])  # the reference's row-vector matrix
+            np.testing.assert_allclose(got[b, t], (pose_BxTxR[b, t].reshape(4, 3) @ R).reshape(12), atol=1e-6)
+    # one angle per window (B,) turns all its samples alike
+    np.testing.assert_allclose(curves.rotate_rows_y(pose_BxTxR, th_BxT[:, 1]),
+                               curves.rotate_rows_y(pose_BxTxR, np.repeat(th_BxT[:, 1:2], 3, 1)), atol=1e-6)
+
+
 # ---------------------------------------------------------------------------------------------
 # shapes, user curves, files, degenerate curves
 # ---------------------------------------------------------------------------------------------

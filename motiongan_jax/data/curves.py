@@ -5,7 +5,8 @@ Units are metres, Y up, floor = X-Z plane; every 2-D curve here is (x, z).
 Training hot path (pure jnp, jit-able, batched): `window_curves`. Whole clips and user curves
 (numpy around the same spline core): `floor_path` (and back: `on_floor`), `spline_curve`,
 `resample_polyline`, `load_curve_file`, `curve_from_root_positions`, `shape_curve`, `check_curve`.
-Network-side helpers (CONTRACTS.md): `velocity`, `integrate`, and `rotate_y` for augmentation.
+Network-side helpers (CONTRACTS.md): `velocity`, `integrate`, and `rotate_y` / `rotate_rows_y` (points /
+pose rows) for augmentation and the walker's frame.
 
 Spline (docs/DESIGN.md §2.3, with the reference's bugs fixed):
 - knots at frames 0, I, 2I, ... < n-1 plus a final knot at frame n-1 holding r[n-1]. The
@@ -291,6 +292,13 @@ def rotate_y(x, theta):
     return jnp.stack([nx, jnp.broadcast_to(x[..., 1], nx.shape), nz], axis=-1)
 
 
+def rotate_rows_y(pose_xR, theta):
+    """Pose rows (..., R), joint-major x, y, z triples, each turned by theta about +y as `rotate_y`
+    turns a point; theta as there, with the rows' leading dims (or fewer)."""
+    pose_xR = jnp.asarray(pose_xR)
+    return rotate_y(pose_xR.reshape(pose_xR.shape[:-1] + (-1, 3)), theta).reshape(pose_xR.shape)
+
+
 def heading(v_BxTx3):
     """Heading of floor velocities, radians about +y with 0 = +z: atan2(v_x, v_z), the angle that
     `rotate_y` turns +z into. A zero velocity gets heading 0."""
@@ -303,9 +311,7 @@ def window_frame(root_vel_BxTx3, pose_BxTxR):
     root velocities after the first (v[0] duplicates v[1], `velocity`), points along +z: the
     evaluator's canonical frame. A window that does not move keeps its orientation (heading 0)."""
     theta_B = heading(jnp.sum(root_vel_BxTx3[:, 1:], axis=1))
-    b, t, r = pose_BxTxR.shape
-    pose = rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), -theta_B).reshape(b, t, r)
-    return rotate_y(root_vel_BxTx3, -theta_B), pose
+    return rotate_y(root_vel_BxTx3, -theta_B), rotate_rows_y(pose_BxTxR, -theta_B)
 
 
 # Binomial smoothing of the walking direction: the training curves carry 2% spatial jitter, i.e.

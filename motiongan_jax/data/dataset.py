@@ -477,7 +477,7 @@ def make_sample_batch(cfg: DataConfig, batch_size: int):
             theta_B = jax.random.uniform(k_rot, (batch_size,), maxval=2 * jnp.pi)
             root = curves.rotate_y(root, theta_B[:, None])
             curve = curves.rotate_y(curve, theta_B[:, None])
-            pose = curves.rotate_y(pose.reshape(batch_size, T, -1, 3), theta_B[:, None, None]).reshape(pose.shape)
+            pose = curves.rotate_rows_y(pose, theta_B[:, None])
         return {
             "root_BxTx3": root.astype(jnp.float32),
             "pose_BxTxR": pose.astype(jnp.float32),

@@ -159,8 +159,7 @@ class WalkerGenerator(Generator):
         if self.frame == "curve":
             out_BxT = curves.smooth_heading(curve_vel_BxTx3)
             root_vel_BxTx3 = curves.rotate_y(root_vel_BxTx3, out_BxT)
-            r = pose_BxTxR.shape[2]
-            pose_BxTxR = curves.rotate_y(pose_BxTxR.reshape(b, t, r // 3, 3), out_BxT[..., None]).reshape(b, t, r)
+            pose_BxTxR = curves.rotate_rows_y(pose_BxTxR, out_BxT)
         if self.residual_root:
             root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
         return root_vel_BxTx3, pose_BxTxR
