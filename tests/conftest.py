@@ -14,6 +14,8 @@ import importlib
 import io
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
 import types
 from pathlib import Path
@@ -22,14 +24,32 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
-# Compile time dominates on CPU; the backend optimiser level changes how fast the program runs,
-# not what it computes.
-FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
-# ... for every program of the run too, including those of the tools the tests start (they inherit
-# the environment; XLA reads it when its CPU client starts, after this): about half the CPU time
-# of a compile-bound test. The caller's flags come first.
-os.environ["XLA_FLAGS"] = " ".join(
-    [os.environ.get("XLA_FLAGS", "")] + [f"--{k}={str(v).lower()}" for k, v in FAST.items()]).strip()
+# Compile time dominates on CPU. These options change how fast a program runs and how XLA
+# generates its code, not what the tests compare: both sides of every bit-for-bit comparison are
+# compiled alike. The older loop emitters (fusion emitters off) compile the tiny train step in a
+# third of the CPU time (docs/TESTING.md).
+FAST = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+        "xla_cpu_use_fusion_emitters": False}
+
+
+def _xla_knows(option: str) -> bool:
+    """Whether this jaxlib's XLA has the compile option `option`, asked in a child process: an
+    unknown flag in XLA_FLAGS aborts every process that starts XLA."""
+    code = f"import jax; jax.jit(lambda: 0).lower().compile(compiler_options={{{option!r}: False}})"
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True).returncode == 0
+
+
+if "MOTIONGAN_TEST_FAST" not in os.environ:  # pytest's own process (xdist's workers inherit the result)
+    if not _xla_knows("xla_cpu_use_fusion_emitters"):  # an XLA before or after that option
+        del FAST["xla_cpu_use_fusion_emitters"]
+    os.environ["MOTIONGAN_TEST_FAST"] = ",".join(FAST)
+    # ... for every program of the run too, including those of the tools the tests start (they
+    # inherit the environment; XLA reads it when its CPU client starts, after this). The caller's
+    # flags come first.
+    os.environ["XLA_FLAGS"] = " ".join(
+        [os.environ.get("XLA_FLAGS", "")] + [f"--{k}={str(v).lower()}" for k, v in FAST.items()]).strip()
+FAST = {k: v for k, v in FAST.items() if k in os.environ["MOTIONGAN_TEST_FAST"].split(",")}
 
 
 def compiled(fn, *args):
@@ -51,9 +71,9 @@ def compiled_call(module, *args, **kwargs):
 # The files whose tests take longest in all (docs/TESTING.md, Durations), longest first: with
 # `--dist loadfile` (pyproject.toml) xdist hands whole files to the workers in collection order,
 # and longest-first keeps the two workers' shares even.
-SLOW_FILES = ("test_train.py", "test_step.py", "test_multiprocess.py", "test_fast_equals_reference.py",
-              "test_evaluation.py", "test_analysis.py", "test_notebook.py", "test_generate.py", "test_parallel.py",
-              "test_nn.py", "test_losses.py", "test_pretrained.py", "test_curves.py", "test_data.py")
+SLOW_FILES = ("test_train.py", "test_multiprocess.py", "test_step.py", "test_fast_equals_reference.py",
+              "test_evaluation.py", "test_analysis.py", "test_notebook.py", "test_generate.py", "test_nn.py",
+              "test_parallel.py", "test_curves.py", "test_pretrained.py", "test_losses.py", "test_data.py")
 
 
 def pytest_collection_modifyitems(config, items):
