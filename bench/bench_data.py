@@ -21,8 +21,7 @@ import jax
 import numpy as np
 
 from motiongan_jax.config import DataConfig
-from motiongan_jax.data import dataset as data
-from motiongan_jax.data import synthetic
+from motiongan_jax.data import clip_cache, file_labels, sampling, synthetic
 from motiongan_jax.motion import kinematics
 from motiongan_jax.motion.representation import (
     CMU_UNIT_M,
@@ -34,18 +33,18 @@ SHARED = Path(os.environ.get("MOTIONGAN_SHARED_DATA", Path(__file__).resolve().p
 
 
 def bench_preprocess(data_dir: Path, repeats: int) -> None:
-    entries = data.discover(data_dir, "bandai")
+    entries = file_labels.discover(data_dir, "bandai")
     cold, warm = [], []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as tmp:
             os.environ["MOTIONGAN_CACHE"] = tmp
             t0 = time.perf_counter()
             for p, lab in entries:
-                data.preprocess_clip(p, lab, 0.01, 0)
+                clip_cache.preprocess_clip(p, lab, 0.01, 0)
             cold.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
             for p, lab in entries:
-                data.preprocess_clip(p, lab, 0.01, 0)
+                clip_cache.preprocess_clip(p, lab, 0.01, 0)
             warm.append(time.perf_counter() - t0)
     print(f"preprocess {len(entries)} files of {data_dir.name}: cold (parse+FK+cache write) median "
           f"{statistics.median(cold):.2f} s, warm (cache hits) median {statistics.median(warm):.2f} s "
@@ -61,7 +60,7 @@ def long_clips() -> tuple[list, list[str]]:
         motion = synthetic.generate_clip(synthetic.STYLES[name], key_or_seed=i, num_frames=2400 + 300 * i, fps=120.0)
         layout = layout_from_skeleton(motion.skeleton, CMU_UNIT_M)
         root, pose = to_rows(kinematics.world_positions(motion)[1:] * CMU_UNIT_M, layout)
-        clips.append(data.Clip(name, data.FileLabel(name, 1), 120.0, root.astype(np.float32),
+        clips.append(clip_cache.Clip(name, file_labels.FileLabel(name, 1), 120.0, root.astype(np.float32),
                                pose.astype(np.float32), layout))
     return clips, styles
 
@@ -69,8 +68,8 @@ def long_clips() -> tuple[list, list[str]]:
 def bench_batches(repeats: int) -> None:
     clips, styles = long_clips()
     cfg = DataConfig(frame_nums=1024, frame_step=8, control_point_interval=256, window_stride=3)
-    arrays = data.build_arrays(clips, tuple(styles), cfg)
-    sample = jax.jit(data.make_sample_batch(cfg, 24))
+    arrays = sampling.build_arrays(clips, tuple(styles), cfg)
+    sample = jax.jit(sampling.make_sample_batch(cfg, 24))
     key = jax.random.key(0)
     t0 = time.perf_counter()
     jax.block_until_ready(sample(arrays, key, 0))

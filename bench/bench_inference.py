@@ -2,7 +2,7 @@
 """Inference benchmark: G's forward for one walk (run by hand, never in CI). Prints medians.
 
 The paper's G (64 base channels, CMU skeleton: 27 joints -> 81 rows, 28 styles), batch 1, z = 0, the
-Latent Transform included, jitted as generate.py runs it (`train.inference.generator_apply`). Lengths:
+Latent Transform included, jitted as generate.py runs it (`model.apply.g_apply`). Lengths:
 T 128 (one training window), T 1024, and a 2-minute walk in one call (15 samples/s, the paper's
 120 fps / frame step 8: T 1800). Compile time is reported separately from the run time. The
 2-minute path is also timed through `walk_lib.generate_motion` (G + root integration + joint
@@ -24,9 +24,9 @@ import jax.numpy as jnp
 
 from bench.bench_train_step import paper_or_small
 from bench.timing import load
-from motiongan_jax.data import curves
 from motiongan_jax.generate import walk as walk_lib
-from motiongan_jax.train import inference
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import trajectory
 from motiongan_jax.train import state as train_state
 
 REFERENCE_S = {128: 0.084, 1024: 0.62}
@@ -53,19 +53,20 @@ def main():
         state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
         for T in (int(t) for t in args.lengths.split(",")):
             curve = walk(T)
-            vel = curves.velocity(curve)
-            fn = jax.jit(inference.generator_apply)
+            vel = trajectory.velocity(curve)
+            fn = model_apply.g_apply
             t0 = time.perf_counter()
-            compiled = fn.lower(state, vel, labels).compile()
+            w = model_apply.style_codes(state, labels)
+            compiled = fn.lower(state, vel, w).compile()
             compile_s = time.perf_counter() - t0
             cost = compiled.cost_analysis()
             cost = cost[0] if isinstance(cost, (list, tuple)) else cost
             gflop = float(cost.get("flops", float("nan"))) / 1e9 if cost else float("nan")
-            jax.block_until_ready(compiled(state, vel, labels))
+            jax.block_until_ready(compiled(state, vel, w))
             times = []
             for _ in range(args.repeats):
                 t0 = time.perf_counter()
-                jax.block_until_ready(compiled(state, vel, labels))
+                jax.block_until_ready(compiled(state, vel, w))
                 times.append(time.perf_counter() - t0)
             med = statistics.median(times)
             ref = (f"; reference {REFERENCE_S[T] * 1e3:.0f} ms, goal <= {GOAL_S[T] * 1e3:.0f} ms"
@@ -74,7 +75,7 @@ def main():
                   f"{med * 1e3:7.1f} ms (min {min(times) * 1e3:.1f}, {args.repeats} runs); compile "
                   f"{compile_s:.1f} s; XLA counts {gflop:.1f} GFLOP{ref}   ({load()})", flush=True)
             if T == 120 * SAMPLES_PER_S:
-                w = inference.latent_w(state, labels)
+                w = model_apply.style_codes(state, labels)
                 walk_lib.generate_motion(state, layout, curve[0], w)  # compiles generate's own jit
                 times = []
                 for _ in range(max(3, args.repeats // 2)):

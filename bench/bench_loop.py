@@ -30,7 +30,8 @@ import jax
 from bench.bench_data import long_clips
 from bench.timing import load, median_time
 from motiongan_jax.config import load_config, override
-from motiongan_jax.data import dataset as data
+from motiongan_jax.data import clip_cache, sampling
+from motiongan_jax.train import objectives
 from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 from motiongan_jax.train.loop import make_step_fn
@@ -42,7 +43,7 @@ def setup(which: str):
     """(cfg, arrays, layout, num_styles, step_fn) with real batches for `which`."""
     if which == "small":
         cfg = load_config(CONFIGS / "small.py")
-        dataset = data.load_dataset(cfg.data, log=lambda s: None)
+        dataset = clip_cache.load_dataset(cfg.data, log=lambda s: None)
         clips, styles, layout = dataset.train, dataset.style_names, dataset.layout
         step_fn = make_step_fn(cfg, dataset, log=lambda s: None)
     else:
@@ -52,7 +53,7 @@ def setup(which: str):
         clips, styles = long_clips()
         layout = clips[0].layout
         step_fn = step_lib.make_train_step(cfg, layout, len(styles))
-    return cfg, data.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles), step_fn
+    return cfg, sampling.build_arrays(clips, tuple(styles), cfg.data), layout, len(styles), step_fn
 
 
 def per_step(loop, block: int, repeats: int) -> float:
@@ -78,7 +79,7 @@ def main():
         block = args.block if which == "small" else max(2, args.block // 10)
         B = cfg.train.batch_size
         k_data, k_step = jax.random.key(1), jax.random.key(2)
-        sample_fn = data.make_sample_batch(cfg.data, B)
+        sample_fn = sampling.make_sample_batch(cfg.data, B, objectives.reconstructed_rows(cfg.train))
         sample = jax.jit(sample_fn)
         train_step = jax.jit(step_fn, donate_argnums=0)
 

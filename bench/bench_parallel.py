@@ -35,21 +35,21 @@ def child(args) -> None:
         jax.distributed.initialize(args.coordinator, args.num_processes, args.process_id)
     from bench.timing import load
     from motiongan_jax.config import load_config, override
-    from motiongan_jax.data import dataset as data
-    from motiongan_jax.train import parallel
+    from motiongan_jax.data import clip_cache, sampling
+    from motiongan_jax.train import objectives, parallel
     from motiongan_jax.train import state as train_state
     from motiongan_jax.train.loop import make_step_fn
 
     cfg = override(load_config(ROOT / "configs" / f"{args.which}.py"), args.set)
-    dataset = data.load_dataset(cfg.data, log=lambda s: None)
-    arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
+    dataset = clip_cache.load_dataset(cfg.data, log=lambda s: None)
+    arrays = sampling.build_arrays(dataset.train, dataset.style_names, cfg.data)
     B = cfg.train.batch_size
     step_fn = make_step_fn(cfg, dataset, log=lambda s: None)
 
     def keyed_step(state, batch, key, s):
         return step_fn(state, batch, jax.random.fold_in(key, s))
 
-    sample = jax.jit(data.make_sample_batch(cfg.data, B))
+    sample = jax.jit(sampling.make_sample_batch(cfg.data, B, objectives.reconstructed_rows(cfg.train)))
     state = train_state.init_state(cfg, dataset.layout, dataset.num_styles, jax.random.key(0))
     k_data, key = jax.random.key(1), jax.random.key(2)
     if jax.device_count() > 1:

@@ -40,7 +40,7 @@ from bench.bench_train_step import (
     stand_in_gait,
 )
 from bench.timing import load, median_time
-from motiongan_jax.data import curves
+from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.nn.generator import Generator
@@ -53,18 +53,17 @@ SCOPES = Generator.BLOCKS + ("heads", "D")
 def pieces(cfg, layout, num_styles, state, batch, repeats):
     """Seconds of each part of the step, jitted on its own."""
     tcfg = cfg.train
-    labels, z = objectives.sample_labels_and_z(cfg, num_styles, batch["curve_BxTx3"].shape[0], jax.random.key(5))
-    phase = objectives.sample_phase(cfg, batch["curve_BxTx3"].shape[0], jax.random.key(5))
+    labels, z, phase = objectives.generator_inputs(cfg, num_styles, batch, jax.random.key(5))
     gait = stand_in_gait(cfg, layout, num_styles)
-    curve_vel = curves.velocity(batch["curve_BxTx3"])
-    real_vel = curves.velocity(batch["root_BxTx3"])
+    curve_vel = trajectory.velocity(batch["curve_BxTx3"])
+    real_vel = trajectory.velocity(batch["root_BxTx3"])
     bone_pairs = tuple((int(a), int(b)) for a, b in layout.bone_pairs)
     bone_lengths = jnp.asarray(layout.bone_lengths_m, jnp.float32)
 
     def g_forward(g_params):
         g = nnx.merge(state.g_def, g_params, copy=True)
         w = g.style(labels, z)
-        return g(curve_vel, w) if phase is None else g(curve_vel, w, phase)  # the paper's G takes no phase
+        return g(curve_vel, w, phase)
 
     def g_fwd_bwd(g_params, cot):
         out, vjp = jax.vjp(g_forward, g_params)
@@ -87,9 +86,8 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
     def g_loss_grad(d_params, sn, fake):
         def obj(f):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
-            terms = objectives.g_losses(d, *f, labels, batch["curve_BxTx3"], bone_pairs, bone_lengths, tcfg,
-                                      LENGTH_UNIT_M, gait=gait, real_vel_BxTx3=real_vel,
-                                      log_stride_B=jnp.zeros(labels.shape))
+            terms = objectives.g_losses(d, *f, labels, batch, tcfg, LENGTH_UNIT_M, bone_pairs=bone_pairs,
+                                        bone_lengths_m=bone_lengths, gait=gait, log_stride_B=jnp.zeros(labels.shape))
             return terms["g_total"]
 
         return jax.value_and_grad(obj)(fake)
@@ -161,7 +159,7 @@ def main():
     B, T = cfg.train.batch_size, cfg.data.window_T
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {args.which}: B {B}, T {T}, impl {args.impl}; {load()}")
     state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=args.impl)
-    batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
+    batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1), objectives.reconstructed_rows(cfg.train))
 
     if not args.no_pieces:
         for name, sec in pieces(cfg, layout, num_styles, state, batch, args.repeats).items():

@@ -29,9 +29,9 @@ import jax.numpy as jnp
 
 from bench.timing import load
 from motiongan_jax.config import load_config, override
-from motiongan_jax.data import dataset as data
-from motiongan_jax.data import synthetic
-from motiongan_jax.motion.representation import CMU_UNIT_M, layout_from_skeleton
+from motiongan_jax.data import gait_stats, synthetic
+from motiongan_jax.motion.representation import CMU_UNIT_M, foot_joints, layout_from_skeleton
+from motiongan_jax.train import objectives
 from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
@@ -54,7 +54,7 @@ def stand_in_gait(cfg, layout, num_styles):
     the step's cost), else None."""
     if not step_lib.needs_gait_targets(cfg.train):
         return None
-    return data.GaitTargets((1.2,) * num_styles, 0.02, data.foot_joints(layout))
+    return gait_stats.GaitTargets((1.2,) * num_styles, 0.02, foot_joints(layout))
 
 
 def bench_step_fn(cfg, layout, num_styles):
@@ -62,8 +62,9 @@ def bench_step_fn(cfg, layout, num_styles):
     return step_lib.make_train_step(cfg, layout, num_styles, stand_in_gait(cfg, layout, num_styles))
 
 
-def fake_batch(B, T, R, num_styles, key):
-    """Random batch of the step's shapes, with a gait phase (read by configs with train.w_g_rec)."""
+def fake_batch(B, T, R, num_styles, key, rec_rows: int = 0):
+    """Random batch of the step's shapes, with a gait phase and `rec_rows` reconstructed rows
+    (read by configs with train.w_g_rec)."""
     k1, k2, k3, k4 = jax.random.split(key, 4)
     t = jnp.arange(T, dtype=jnp.float32)[None, :, None]
     root = (jnp.concatenate([0.1 * t, jnp.ones((1, T, 1)), jnp.zeros((1, T, 1))], -1)
@@ -75,6 +76,7 @@ def fake_batch(B, T, R, num_styles, key):
         "label_B": jax.random.randint(k4, (B,), 0, num_styles),
         "phase_BxT": jnp.broadcast_to(0.5 * t[..., 0], (B, T)),
         "phase_valid_BxT": jnp.ones((B, T), bool),
+        "rec_B": jnp.arange(B) < rec_rows,
     }
 
 
@@ -89,7 +91,7 @@ def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
     B, T = cfg.train.batch_size, cfg.data.window_T
     state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
     step_fn = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
-    batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1))
+    batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1), objectives.reconstructed_rows(cfg.train))
     t0 = time.perf_counter()
     compiled = step_fn.lower(state, batch, jax.random.key(2)).compile()
     compile_s = time.perf_counter() - t0

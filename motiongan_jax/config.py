@@ -17,7 +17,13 @@ import json
 from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
-from motiongan_jax.motion.representation import LENGTH_UNIT_M
+# The paper's 28 classes, in the order that fixes label indices 0..27 (docs/DESIGN.md §2.1).
+PAPER_STYLES = (
+    "Cat", "Chicken", "Dinosaur", "Drunk", "GanglyTeen", "GracefulLady", "Normal", "OldMan",
+    "SexyLady", "StrongMan", "Childish", "Clumsy", "Cool", "Depressed", "Elated", "Elderlyman",
+    "Happy", "Joy", "Lavish", "Marching", "Painfulleftknee", "Relaxed", "Rushed", "Sad", "Scared",
+    "Sexy", "Shy", "Sneaky",
+)
 
 LabelRule = Literal["paper", "bandai", "bandai_session", "cmu", "synthetic"]
 LatentInit = Literal["paper", "torch_default"]
@@ -310,7 +316,8 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
 # value loads without them; one that used another value is refused (docs/RESULTS.md, "Retired
 # options", keeps their record).
 RETIRED = {
-    "model": {"phase_wavelengths_m": (), "use_z": "transform", "d_frame": "world", "length_unit": LENGTH_UNIT_M},
+    "model": {"phase_wavelengths_m": (), "use_z": "transform", "d_frame": "world",
+              "length_unit": 0.056444},  # representation.LENGTH_UNIT_M (config imports nothing of the package)
     "data": {"augment_fps": True},
 }
 # String options that became booleans: old value -> new value.
@@ -389,10 +396,6 @@ def paper() -> Config:
     """Exactly the paper: CMU styled walks (subjects 137 and 142), 28 styles, B 24, T 128, 200k
     steps. The CMU trials are not shipped (pass --data DIR, files named like 137_04.bvh); far too
     slow for a CPU (its step time: docs/PERFORMANCE.md): run it on a GPU."""
-    from motiongan_jax.data.dataset import (
-        PAPER_STYLES,  # data imports jax: only when this preset is asked for
-    )
-
     return Config(
         name="paper",
         data=DataConfig(label_rule="cmu", styles=PAPER_STYLES, start_offset=1, control_point_interval=256,

@@ -199,10 +199,9 @@ def trained_tiny(tiny_cfg, tmp_path_factory):
 def random_tiny(tiny_cfg, tmp_path_factory):
     """The tiny config's G and D with seeded random parameters, as a checkpoint at step 4 of a run
     on the embedded dataset: checkpoints/ alone (what generation reads). Read only."""
-    from motiongan_jax.data import dataset as data
-
+    from motiongan_jax.data import clip_cache
     def build(wd):
-        random_run(tiny_cfg, wd, data_dir=str(data.resolve_data_dir(tiny_cfg.data)))
+        random_run(tiny_cfg, wd, data_dir=str(clip_cache.resolve_data_dir(tiny_cfg.data)))
 
     path = _build_once(tmp_path_factory, "random_tiny", build)
     with _read_only(path):

@@ -23,11 +23,11 @@ from motiongan_jax.analysis import (
 from motiongan_jax.analysis import (
     search as search_lib,
 )
-from motiongan_jax.data import curves, synthetic
+from motiongan_jax.data import synthetic
 from motiongan_jax.generate import styles as styles_lib
-from motiongan_jax.generate import walk
-from motiongan_jax.motion import bvh, kinematics, representation
-from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import bvh, kinematics, representation, trajectory
+from motiongan_jax.train import checkpoint
 
 
 @pytest.fixture(scope="module")
@@ -129,12 +129,12 @@ def test_style_codes_and_gait_parameters(run):
     chex.assert_shape(codes.zero_CxD, (len(names), D))
     chex.assert_shape(codes.samples_CxKxD, (len(names), 3, D))
     labels = jnp.arange(len(names))
-    np.testing.assert_allclose(codes.zero_CxD, inference.generator(state).style(
+    np.testing.assert_allclose(codes.zero_CxD, model_apply.generator(state).style(
         labels, jnp.zeros((len(names), cfg.model.z_dim))), rtol=1e-5, atol=1e-9)
     z = jax.random.normal(jax.random.key(5), (len(names), cfg.model.z_dim))
     w = styles_lib.latent_codes(state, labels, z)
     chex.assert_shape(w, (len(names), D))
-    np.testing.assert_allclose(w, inference.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(w, model_apply.generator(state).style(labels, z), rtol=1e-5, atol=1e-9)
     assert not np.allclose(w, codes.zero_CxD)  # z reaches w
     gait = probe_lib.gait_parameters(meta, cfg)
     assert gait["param_names"] == list(synthetic.PARAM_NAMES) + ["speed"]
@@ -151,10 +151,10 @@ def test_w_blend_equals_adain_blend(run):
     _, state, meta, cfg, _ = run
     T, D = 64, cfg.model.w_dim  # the shapes of the search tests: their compiled G is reused
     curve = jnp.cumsum(jax.random.normal(jax.random.key(0), (1, T, 3)).at[..., 1].set(0), axis=1)
-    vel = np.asarray(curves.velocity(curve))
+    vel = np.asarray(trajectory.velocity(curve))
     # codes far apart (|w| ~ 1, not the ~1e-5 codes of a 4-step model), so that they matter
     ws = jax.random.normal(jax.random.key(1), (3, D))
-    by_w_fn = lambda w: walk.apply_code(state, vel, w)  # noqa: E731
+    by_w_fn = lambda w: model_apply.apply_code(state, vel, w)  # noqa: E731
     adain_fn = jax.jit(adain_lib.generator_apply_adain)
     by_adain_fn = lambda adain: adain_fn(state, vel, adain)  # noqa: E731
     outs = [by_w_fn(ws[i:i + 1]) for i in range(3)]
@@ -227,7 +227,7 @@ def test_style_search_recovers_a_known_w(run):
     w_true = codes.centroids_CxD[0] + 0.3 * direction / jnp.linalg.norm(direction)
     probe = clips.MotionWindows(curve, jnp.zeros((N, T, layout.num_rows)), curve, np.zeros(N, int), 1)
     rv, pose = search_lib.reconstruct(state, probe, w_true)
-    target = clips.MotionWindows(curves.integrate(curve[:, 0], rv), pose, curve, np.zeros(N, int), 1)
+    target = clips.MotionWindows(trajectory.integrate(curve[:, 0], rv), pose, curve, np.zeros(N, int), 1)
     before = jax.tree.map(np.array, state.g_params)
     res = search_lib.style_search(state, target, codes.centroids_CxD[1:3], ["a", "b"], steps=100, lr=0.02)
     chex.assert_shape(res.w_SxD, (2, cfg.model.w_dim))

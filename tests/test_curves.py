@@ -13,6 +13,7 @@ from scipy.integrate import quad
 from scipy.interpolate import CubicSpline, interp1d
 
 from motiongan_jax.data import curves
+from motiongan_jax.motion import trajectory
 
 I = 16  # noqa: E741 - the paper's name for the control-point interval; small keeps every test tiny
 
@@ -205,8 +206,8 @@ def test_rotating_the_path_rotates_the_curve():
     theta = np.array([0.7, -2.1], np.float32)
     kw = dict(T=T, interval=I, noise=0.0, key=jax.random.key(0))
     out = window_curves_jit(path, lengths, **kw)
-    out_rot = window_curves_jit(curves.rotate_y(path, theta), lengths, **kw)
-    np.testing.assert_allclose(out_rot, curves.rotate_y(out, theta), atol=5e-5)
+    out_rot = window_curves_jit(trajectory.rotate_y(path, theta), lengths, **kw)
+    np.testing.assert_allclose(out_rot, trajectory.rotate_y(out, theta), atol=5e-5)
 
 
 def test_window_curves_rejects_noise_without_key():
@@ -231,20 +232,20 @@ def test_spline_curve_matches_the_independent_reference():
 def test_velocity_by_hand_and_reflected_first_element():
     x = jnp.array([[0.0], [1.0], [3.0], [6.0]])
     # differences 1, 2, 3; the first element reflects to the second difference (numpy 'reflect')
-    np.testing.assert_array_equal(curves.velocity(x), [[2.0], [1.0], [2.0], [3.0]])
+    np.testing.assert_array_equal(trajectory.velocity(x), [[2.0], [1.0], [2.0], [3.0]])
     d = np.diff(np.asarray(x), axis=0)
-    np.testing.assert_array_equal(curves.velocity(x), np.pad(d, ((1, 0), (0, 0)), mode="reflect"))
-    np.testing.assert_array_equal(curves.integrate(jnp.array([0.0]), jnp.array(
+    np.testing.assert_array_equal(trajectory.velocity(x), np.pad(d, ((1, 0), (0, 0)), mode="reflect"))
+    np.testing.assert_array_equal(trajectory.integrate(jnp.array([0.0]), jnp.array(
         [[99.0], [1.0], [2.0], [3.0]])), x)  # v[0] is ignored
 
 
 @pytest.mark.parametrize("shape", [(7, 3), (4, 7, 3), (2, 3, 7, 2)])
 def test_velocity_integrate_round_trip(shape):
     x = jax.random.normal(jax.random.key(0), shape)
-    v = curves.velocity(x)
+    v = trajectory.velocity(x)
     chex.assert_shape(v, shape)
     np.testing.assert_array_equal(v[..., 0, :], v[..., 2, :])
-    np.testing.assert_allclose(curves.integrate(x[..., 0, :], v), x, atol=1e-5)
+    np.testing.assert_allclose(trajectory.integrate(x[..., 0, :], v), x, atol=1e-5)
 
 
 def test_rotate_y_is_the_reference_matrix_on_row_vectors():
@@ -253,16 +254,16 @@ def test_rotate_y_is_the_reference_matrix_on_row_vectors():
     R = np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
     assert np.isclose(np.linalg.det(R), 1.0)
     x = np.asarray(jax.random.normal(jax.random.key(1), (5, 4, 3)))
-    np.testing.assert_allclose(curves.rotate_y(x, theta), x @ R, atol=1e-6)
+    np.testing.assert_allclose(trajectory.rotate_y(x, theta), x @ R, atol=1e-6)
     # quarter turn by hand: +x goes to -z, +z to +x
-    np.testing.assert_allclose(curves.rotate_y(jnp.array([[1.0, 2.0, 0.0], [0.0, 0.0, 1.0]]),
+    np.testing.assert_allclose(trajectory.rotate_y(jnp.array([[1.0, 2.0, 0.0], [0.0, 0.0, 1.0]]),
                                                math.pi / 2), [[0, 2, -1], [1, 0, 0]], atol=1e-6)
     # per-sample angles: (B,) and (B, 1) agree; the 2-D (x, z) form agrees with the 3-D one
     th = np.array([0.1, 0.5, 1.0, 2.0, 3.0])
-    np.testing.assert_allclose(curves.rotate_y(x, th), curves.rotate_y(x, th[:, None]))
-    np.testing.assert_allclose(curves.rotate_y(x[..., 0::2], th), curves.rotate_y(x, th)[..., 0::2],
+    np.testing.assert_allclose(trajectory.rotate_y(x, th), trajectory.rotate_y(x, th[:, None]))
+    np.testing.assert_allclose(trajectory.rotate_y(x[..., 0::2], th), trajectory.rotate_y(x, th)[..., 0::2],
                                atol=1e-6)
-    np.testing.assert_allclose(curves.rotate_y(x, th)[1], x[1] @ np.array(
+    np.testing.assert_allclose(trajectory.rotate_y(x, th)[1], x[1] @ np.array(
         [[math.cos(0.5), 0, -math.sin(0.5)], [0, 1, 0], [math.sin(0.5), 0, math.cos(0.5)]]),
         atol=1e-6)
 
@@ -270,15 +271,15 @@ def test_rotate_y_is_the_reference_matrix_on_row_vectors():
 def test_rotate_rows_y_turns_every_joint_triple_by_its_samples_angle():
     pose_BxTxR = np.asarray(jax.random.normal(jax.random.key(2), (2, 3, 12)), np.float64)  # 4 joints
     th_BxT = np.array([[0.0, 0.4, 1.1], [2.0, -0.7, 3.0]])
-    got = np.asarray(curves.rotate_rows_y(pose_BxTxR, th_BxT))
+    got = np.asarray(trajectory.rotate_rows_y(pose_BxTxR, th_BxT))
     for b in range(2):
         for t in range(3):
             c, s = math.cos(th_BxT[b, t]), math.sin(th_BxT[b, t])
             R = np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])  # the reference's row-vector matrix
             np.testing.assert_allclose(got[b, t], (pose_BxTxR[b, t].reshape(4, 3) @ R).reshape(12), atol=1e-6)
     # one angle per window (B,) turns all its samples alike
-    np.testing.assert_allclose(curves.rotate_rows_y(pose_BxTxR, th_BxT[:, 1]),
-                               curves.rotate_rows_y(pose_BxTxR, np.repeat(th_BxT[:, 1:2], 3, 1)), atol=1e-6)
+    np.testing.assert_allclose(trajectory.rotate_rows_y(pose_BxTxR, th_BxT[:, 1]),
+                               trajectory.rotate_rows_y(pose_BxTxR, np.repeat(th_BxT[:, 1:2], 3, 1)), atol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -292,19 +293,19 @@ def polyline_length(p):
 
 def test_heading_is_the_angle_rotate_y_turns_plus_z_into():
     v = jnp.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 5.0, -2.0], [-3.0, 0.0, 0.0]])
-    np.testing.assert_allclose(curves.heading(v), [0.0, np.pi / 2, np.pi, -np.pi / 2], atol=1e-6)
+    np.testing.assert_allclose(trajectory.heading(v), [0.0, np.pi / 2, np.pi, -np.pi / 2], atol=1e-6)
     th = jnp.linspace(-3.0, 3.0, 13)
-    np.testing.assert_allclose(curves.heading(curves.rotate_y(jnp.array([0.0, 0.0, 0.3]), th)), th, atol=1e-6)
+    np.testing.assert_allclose(trajectory.heading(trajectory.rotate_y(jnp.array([0.0, 0.0, 0.3]), th)), th, atol=1e-6)
 
 
 def test_smooth_heading_by_hand_and_against_numpy():
     # a constant direction is kept exactly, whatever the speed
     v = jnp.array([[[0.2, 0.0, 0.2], [1.0, 0.0, 1.0], [0.5, 0.0, 0.5], [3.0, 0.0, 3.0]]])
-    np.testing.assert_allclose(curves.smooth_heading(v), np.full((1, 4), np.pi / 4), atol=1e-6)
+    np.testing.assert_allclose(trajectory.smooth_heading(v), np.full((1, 4), np.pi / 4), atol=1e-6)
     # a 90-degree corner: the middle sample averages 3 unit vectors along +z and 2 along +x,
     # weights 1+4+6 = 11 and 4+1 = 5, so its heading is atan2(5, 11)
     corner = jnp.array([[0, 0, 1]] * 4 + [[1, 0, 0]] * 4, jnp.float32)
-    got = np.asarray(curves.smooth_heading(corner))
+    got = np.asarray(trajectory.smooth_heading(corner))
     assert got[3] == pytest.approx(np.arctan2(5, 11), abs=1e-6)
     assert got[0] == pytest.approx(0.0, abs=1e-6) and got[-1] == pytest.approx(np.pi / 2, abs=1e-6)
     assert np.all(np.diff(got) >= -1e-7)  # turns monotonically through the corner
@@ -315,7 +316,7 @@ def test_smooth_heading_by_hand_and_against_numpy():
     pad = np.concatenate([u[:, :1], u[:, :1], u, u[:, -1:], u[:, -1:]], axis=1)
     k = np.array([1, 4, 6, 4, 1]) / 16
     avg = sum(k[i] * pad[:, i:i + 20] for i in range(5))
-    np.testing.assert_allclose(curves.smooth_heading(jnp.asarray(w, jnp.float32)),
+    np.testing.assert_allclose(trajectory.smooth_heading(jnp.asarray(w, jnp.float32)),
                                np.arctan2(avg[..., 0], avg[..., 1]), atol=1e-5)
 
 
@@ -437,7 +438,7 @@ def test_missing_file_and_root_positions(tmp_path):
     with pytest.raises(curves.CurveFileError, match="nope.csv"):
         curves.load_curve_file(tmp_path / "nope.csv")
     root = np.array([[0.0, 0.9, 0.0], [0.1, 0.95, 0.2], [0.3, 0.9, 0.1]])
-    np.testing.assert_array_equal(curves.floor_path(root), root[:, [0, 2]])
+    np.testing.assert_array_equal(trajectory.floor_path(root), root[:, [0, 2]])
     np.testing.assert_array_equal(curves.curve_from_root_positions(root), root[:, [0, 2]])
     with pytest.raises(curves.DegenerateCurveError, match="zero length"):
         curves.curve_from_root_positions(np.zeros((5, 3)))
@@ -446,7 +447,7 @@ def test_missing_file_and_root_positions(tmp_path):
 def test_window_frame_turns_the_travel_to_plus_z_and_ignores_the_first_velocity():
     """By hand: travel along +x (heading pi/2) is turned to +z, and a pose row along +x with it;
     v[0] (a copy of v[1] in `velocity`) does not enter the heading; a still window is unturned."""
-    from motiongan_jax.data.curves import window_frame
+    from motiongan_jax.motion.trajectory import window_frame
 
     T = 8
     v_x = jnp.zeros((1, T, 3)).at[..., 0].set(0.1).at[0, 0].set(jnp.array([0.0, 0.0, -5.0]))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from motiongan_jax.config import DataConfig
-from motiongan_jax.data import dataset as data
+from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
 from motiongan_jax.motion import representation
 
 # ---------------------------------------------------------------------------------------------
@@ -29,14 +29,14 @@ from motiongan_jax.motion import representation
     ("142_22.bvh", "cmu", "Sneaky", 22),
 ])
 def test_labels_from_file_names(name, rule, style, trial):
-    label = data.label_from_filename(name, rule)
+    label = file_labels.label_from_filename(name, rule)
     assert (label.style, label.trial) == (style, trial)
 
 
 def test_unlabelled_names():
-    assert data.label_from_filename("131_01.bvh", "cmu") is None  # not a styled-walk trial
-    assert data.label_from_filename("walk.bvh", "paper") is None
-    assert data.label_from_filename("Sad_03.bvh", "bandai") is None
+    assert file_labels.label_from_filename("131_01.bvh", "cmu") is None  # not a styled-walk trial
+    assert file_labels.label_from_filename("walk.bvh", "paper") is None
+    assert file_labels.label_from_filename("Sad_03.bvh", "bandai") is None
 
 
 TINY_BVH = """HIERARCHY
@@ -76,36 +76,36 @@ def test_discover_split_and_file_lists(tmp_path):
     for name in ("Sad_01.bvh", "Sad_02.bvh", "Sad_04.bvh", "Happy_04.bvh", "sub/Happy_05.bvh"):
         (tmp_path / name).parent.mkdir(exist_ok=True)
         (tmp_path / name).write_text(TINY_BVH)
-    entries = data.discover(tmp_path, "paper")
+    entries = file_labels.discover(tmp_path, "paper")
     assert [p.name for p, _ in entries] == ["Happy_04.bvh", "Sad_01.bvh", "Sad_02.bvh", "Sad_04.bvh", "Happy_05.bvh"]
-    train, val = data.split_by_trial(entries, 4, 0)
+    train, val = file_labels.split_by_trial(entries, 4, 0)
     assert sorted(p.name for p, _ in val) == ["Happy_04.bvh", "Sad_04.bvh"]
     assert len(train) == 3
-    data.write_file_lists(tmp_path / "out", train, val, root=tmp_path)
+    file_labels.write_file_lists(tmp_path / "out", train, val, root=tmp_path)
     assert (tmp_path / "out" / "val_files.txt").read_text().split() == ["Happy_04.bvh", "Sad_04.bvh"]
     (tmp_path / "nolabel.bvh").write_text(TINY_BVH)
-    with pytest.raises(data.DataError, match="no style label"):
-        data.discover(tmp_path, "paper")
+    with pytest.raises(file_labels.DataError, match="no style label"):
+        file_labels.discover(tmp_path, "paper")
 
 
 def test_cache_key_covers_contents_and_settings(tmp_path, monkeypatch):
     monkeypatch.setenv("MOTIONGAN_CACHE", str(tmp_path / "cache"))
     f = tmp_path / "Sad_01.bvh"
     f.write_text(TINY_BVH)
-    label = data.FileLabel("Sad", 1)
-    fresh = data.preprocess_clip(f, label, 0.05, 0, use_cache=False)
-    first = data.preprocess_clip(f, label, 0.05, 0)
+    label = file_labels.FileLabel("Sad", 1)
+    fresh = clip_cache.preprocess_clip(f, label, 0.05, 0, use_cache=False)
+    first = clip_cache.preprocess_clip(f, label, 0.05, 0)
     cached = list((tmp_path / "cache" / "clips").glob("*.npz"))
     assert len(cached) == 1
-    again = data.preprocess_clip(f, label, 0.05, 0)
+    again = clip_cache.preprocess_clip(f, label, 0.05, 0)
     np.testing.assert_array_equal(again.pose_FxR, fresh.pose_FxR)
     np.testing.assert_array_equal(again.root_Fx3, first.root_Fx3)
     assert again.layout.joint_names == fresh.layout.joint_names
     # Each change makes a new entry: a stale one is never read.
-    assert data.preprocess_clip(f, label, 0.05, 1).root_Fx3.shape[0] == 2
-    assert data.preprocess_clip(f, label, 0.01, 0).root_Fx3[0, 1] == pytest.approx(0.17)
+    assert clip_cache.preprocess_clip(f, label, 0.05, 1).root_Fx3.shape[0] == 2
+    assert clip_cache.preprocess_clip(f, label, 0.01, 0).root_Fx3[0, 1] == pytest.approx(0.17)
     f.write_text(TINY_BVH.replace("0 17 2 0", "0 17 5 0"))
-    changed = data.preprocess_clip(f, label, 0.05, 0)
+    changed = clip_cache.preprocess_clip(f, label, 0.05, 0)
     assert changed.root_Fx3[2, 2] == pytest.approx(0.25)
     assert len(list((tmp_path / "cache" / "clips").glob("*.npz"))) == 4
 
@@ -123,13 +123,13 @@ def _layout() -> representation.RowLayout:
                                     ((0, 1), (1, 2), (0, 3), (3, 4)), np.ones(4))
 
 
-def _straight_clip(n: int, speed: float, label: str, rng) -> data.Clip:
+def _straight_clip(n: int, speed: float, label: str, rng) -> clip_cache.Clip:
     """A root moving along +x at `speed` m/frame, at 1 m height, with a random rigid pose."""
     t = np.arange(n, dtype=np.float32)
     root = np.stack([speed * t, np.ones(n), np.zeros(n)], -1).astype(np.float32)
     pose_J3 = rng.normal(size=(J_REL, 3)).astype(np.float32)
     pose = np.broadcast_to(pose_J3.reshape(-1), (n, 3 * J_REL)).copy()
-    return data.Clip(f"{label}.bvh", data.FileLabel(label, 1), 120.0, root, pose, _layout())
+    return clip_cache.Clip(f"{label}.bvh", file_labels.FileLabel(label, 1), 120.0, root, pose, _layout())
 
 
 CFG = DataConfig(frame_nums=128, frame_step=8, control_point_interval=64, window_stride=4,
@@ -143,8 +143,8 @@ def clips():
 
 
 def test_batch_shapes_and_straight_walk(clips):
-    arrays = data.build_arrays(clips, ("A", "B"), CFG)
-    sample = jax.jit(data.make_sample_batch(CFG, 6))
+    arrays = sampling.build_arrays(clips, ("A", "B"), CFG)
+    sample = jax.jit(sampling.make_sample_batch(CFG, 6))
     batch = sample(arrays, jax.random.key(0), 0)
     T = CFG.window_T
     chex.assert_shape(batch["root_BxTx3"], (6, T, 3))
@@ -162,8 +162,8 @@ def test_batch_shapes_and_straight_walk(clips):
 
 def test_batches_are_functions_of_key_and_step(clips):
     cfg = dataclasses.replace(CFG, curve_noise=0.02, rotate=True, fps_factors=(0.5, 1.0, 1.5))
-    arrays = data.build_arrays(clips, ("A", "B"), cfg)
-    sample = jax.jit(data.make_sample_batch(cfg, 4))
+    arrays = sampling.build_arrays(clips, ("A", "B"), cfg)
+    sample = jax.jit(sampling.make_sample_batch(cfg, 4))
     a = sample(arrays, jax.random.key(1), 3)
     b = sample(arrays, jax.random.key(1), 3)
     c = sample(arrays, jax.random.key(1), 4)
@@ -173,9 +173,9 @@ def test_batches_are_functions_of_key_and_step(clips):
 
 def test_rotation_keeps_shape_and_height(clips):
     cfg = dataclasses.replace(CFG, rotate=True)
-    arrays = data.build_arrays(clips, ("A", "B"), cfg)
-    plain = jax.jit(data.make_sample_batch(CFG, 8))(arrays, jax.random.key(2), 0)
-    rot = jax.jit(data.make_sample_batch(cfg, 8))(arrays, jax.random.key(2), 0)
+    arrays = sampling.build_arrays(clips, ("A", "B"), cfg)
+    plain = jax.jit(sampling.make_sample_batch(CFG, 8))(arrays, jax.random.key(2), 0)
+    rot = jax.jit(sampling.make_sample_batch(cfg, 8))(arrays, jax.random.key(2), 0)
     p0 = np.asarray(plain["pose_BxTxR"]).reshape(8, -1, J_REL, 3)
     p1 = np.asarray(rot["pose_BxTxR"]).reshape(8, -1, J_REL, 3)
     np.testing.assert_allclose(np.linalg.norm(p1, axis=-1), np.linalg.norm(p0, axis=-1), rtol=1e-5)
@@ -187,8 +187,8 @@ def test_rotation_keeps_shape_and_height(clips):
 
 def test_fps_augmentation_changes_the_step(clips):
     cfg = dataclasses.replace(CFG, fps_factors=(0.5, 1.0, 1.5))
-    arrays = data.build_arrays([clips[0]], ("A",), cfg)
-    batch = jax.jit(data.make_sample_batch(cfg, 64))(arrays, jax.random.key(3), 0)
+    arrays = sampling.build_arrays([clips[0]], ("A",), cfg)
+    batch = jax.jit(sampling.make_sample_batch(cfg, 64))(arrays, jax.random.key(3), 0)
     step_frames = np.round(np.diff(np.asarray(batch["root_BxTx3"])[..., 0], axis=1)[:, 0] / 0.01).astype(int)
     assert set(step_frames) <= {4, 8, 9, 10, 11, 12}
     assert {4, 8} <= set(step_frames)
@@ -197,15 +197,15 @@ def test_fps_augmentation_changes_the_step(clips):
 def test_epochs_visit_each_window_once():
     key = jax.random.key(0)
     n, b = 20, 4
-    seen = np.concatenate([np.asarray(data.epoch_indices(key, s, n, b)) for s in range(n // b)])
+    seen = np.concatenate([np.asarray(sampling.epoch_indices(key, s, n, b)) for s in range(n // b)])
     assert sorted(seen) == list(range(n))
-    nxt = np.concatenate([np.asarray(data.epoch_indices(key, s, n, b)) for s in range(n // b, 2 * n // b)])
+    nxt = np.concatenate([np.asarray(sampling.epoch_indices(key, s, n, b)) for s in range(n // b, 2 * n // b)])
     assert sorted(nxt) == list(range(n)) and not np.array_equal(seen, nxt)
 
 
 def test_short_clips_are_reported(clips):
-    with pytest.raises(data.DataError, match="frame_nums"):
-        data.build_arrays(clips, ("A", "B"), dataclasses.replace(CFG, frame_nums=512, frame_step=8))
+    with pytest.raises(file_labels.DataError, match="frame_nums"):
+        sampling.build_arrays(clips, ("A", "B"), dataclasses.replace(CFG, frame_nums=512, frame_step=8))
 
 
 def test_bandai_dataset_end_to_end(shared_data, repo):
@@ -215,15 +215,15 @@ def test_bandai_dataset_end_to_end(shared_data, repo):
     cfg = load_config(repo / "configs" / "bandai.py", check=False)
     cfg = override(cfg, [f"data.data_dir={shared_data / 'bandai' / 'dataset-2'}"]).data
     messages = []
-    ds = data.load_dataset(cfg, log=messages.append)
+    ds = clip_cache.load_dataset(cfg, log=messages.append)
     assert ds.style_names == ("active", "elderly", "exhausted", "feminine", "masculine", "normal", "youthful")
     assert ds.layout.num_rows == 60 and ds.fps == pytest.approx(30.0, rel=1e-4)
     # 522 files; those no longer than one window (128 frames) give no window and are dropped
     skipped = int(re.search(r"skipping (\d+) clip", " ".join(messages)).group(1)) if messages else 0
     assert len(ds.train) + len(ds.val) + skipped == 522 and len(ds.train) + len(ds.val) > 400
     assert all(c.label.trial % 4 == 0 for c in ds.val) and all(c.label.trial % 4 for c in ds.train)
-    arrays = data.build_arrays(ds.train, ds.style_names, cfg)
-    batch = jax.jit(data.make_sample_batch(cfg, 8))(arrays, jax.random.key(0), 0)
+    arrays = sampling.build_arrays(ds.train, ds.style_names, cfg)
+    batch = jax.jit(sampling.make_sample_batch(cfg, 8))(arrays, jax.random.key(0), 0)
     chex.assert_shape(batch["pose_BxTxR"], (8, cfg.window_T, 60))
     chex.assert_tree_all_finite(batch)
     # a walk: the root travels ~1 m/s; hips ~0.9 m above the floor before rotation (rotation keeps y)
@@ -241,7 +241,7 @@ def test_bandai_two_sessions_keep_their_styles_apart(shared_data, repo):
     cfg = override(cfg, [f"data.data_dir={shared_data / 'bandai'}", "data.label_rule=bandai_session",
                          "data.val_modulus=2"]).data
     messages = []
-    ds = data.load_dataset(cfg, log=messages.append)
+    ds = clip_cache.load_dataset(cfg, log=messages.append)
     assert len(ds.style_names) == 22
     assert sum(s.startswith("d1_") for s in ds.style_names) == 15 and "d2_elderly" in ds.style_names
     assert any(m.startswith("skipping") for m in messages)
@@ -259,16 +259,16 @@ def test_gait_statistics_recover_the_embedded_styles(repo):
     from motiongan_jax.config import load_config
 
     cfg = load_config(repo / "configs" / "tiny.py").data
-    ds = data.load_dataset(cfg)
-    truth = json.loads((data.resolve_data_dir(cfg) / "styles.json").read_text())["clips"]
-    gait = data.gait_targets(ds.train, ds.style_names, ds.layout)
+    ds = clip_cache.load_dataset(cfg)
+    truth = json.loads((clip_cache.resolve_data_dir(cfg) / "styles.json").read_text())["clips"]
+    gait = gait_stats.gait_targets(ds.train, ds.style_names, ds.layout)
     assert gait.toe_joints == representation.foot_joints(ds.layout)
     want = [np.median([truth[Path(c.source).stem]["stride_length"] for c in ds.train if c.label.style == s])
             for s in ds.style_names]
     np.testing.assert_allclose(gait.stride_m_C, want, rtol=0.05)
     assert 0.02 <= gait.contact_height_m < 0.03  # planted toes sit on the floor: ~2 cm above the 10th percentile
     for clip in ds.train[:: len(ds.train) // 6]:
-        phase, valid = data.clip_gait_phase(clip, ds.layout, gait.toe_joints)
+        phase, valid = gait_stats.clip_gait_phase(clip, ds.layout, gait.toe_joints)
         chex.assert_shape((phase, valid), (len(clip.root_Fx3),))
         assert valid.mean() > 0.95  # steady walks: the steps never fade
         cycles_per_s = (phase[-1] - phase[0]) / (2 * np.pi) / ((len(phase) - 1) / clip.fps)

@@ -23,6 +23,7 @@ from motiongan_jax.demo import engine as E  # noqa: E402
 from motiongan_jax.demo import server  # noqa: E402
 from motiongan_jax.generate import limits, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
+from motiongan_jax.model import apply as model_apply
 from motiongan_jax.motion import bvh  # noqa: E402
 from motiongan_jax.train import checkpoint  # noqa: E402
 
@@ -106,10 +107,10 @@ def test_generate_at_a_bucket_size_is_what_generate_py_makes(client, engine):
 def test_a_new_length_in_a_bucket_does_not_compile_again(engine):
     base = E.parse_request({"points": _line(48), "styles": ["Happy"], "speed": SPEED})
     engine.run(base)
-    compiled = walk._apply_g._cache_size()
+    compiled = model_apply.g_apply._cache_size()
     res = engine.run(E.parse_request({"points": _line(40), "styles": ["Sad"], "speed": SPEED}))
     assert res.generated.positions.shape[1] == 40 and res.samples_bucket == 48  # padded to 48
-    assert walk._apply_g._cache_size() == compiled
+    assert model_apply.g_apply._cache_size() == compiled
 
 
 def test_padding_keeps_the_motion_on_its_curve_and_its_feet_on_the_floor(engine):

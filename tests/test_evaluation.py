@@ -18,7 +18,7 @@ from conftest import load_cli
 
 from motiongan_jax.data import curves, synthetic
 from motiongan_jax.evaluation import clip_metrics, eval_curves, evaluator
-from motiongan_jax.motion import representation
+from motiongan_jax.motion import gait, representation, trajectory
 from motiongan_jax.train import checkpoint
 
 # ---------------------------------------------------------------------------------------------
@@ -39,8 +39,8 @@ def test_canonical_pose_removes_the_heading():
     out0 = np.asarray(evaluator.canonical_pose(root[None], pose[None]))[0]
     np.testing.assert_allclose(out0, pose, atol=1e-6)  # already walking along +z: unchanged
     for theta in (0.7, -2.0, np.pi):
-        rot_root = np.asarray(curves.rotate_y(jnp.asarray(root), theta))
-        rot_pose = np.asarray(curves.rotate_y(jnp.asarray(pose.reshape(16, 2, 3)), theta)).reshape(16, 6)
+        rot_root = np.asarray(trajectory.rotate_y(jnp.asarray(root), theta))
+        rot_pose = np.asarray(trajectory.rotate_y(jnp.asarray(pose.reshape(16, 2, 3)), theta)).reshape(16, 6)
         out = np.asarray(evaluator.canonical_pose(rot_root[None], rot_pose[None]))[0]
         np.testing.assert_allclose(out, pose, atol=1e-5)
 
@@ -228,12 +228,11 @@ def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
 def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
     """plot_gait: per style, the toe heights of a held-out clip (as measured directly) beside G's on
     its path; the CLI writes the figure and refuses bad input with exit 2."""
-    from motiongan_jax.data import dataset as data
-    from motiongan_jax.evaluation import metrics
+    from motiongan_jax.data import clip_cache
     from motiongan_jax.generate import walk
 
     state, meta, cfg, layout = checkpoint.load_run(tiny_run)
-    ds = data.load_dataset(cfg.data)
+    ds = clip_cache.load_dataset(cfg.data)
     feet = representation.foot_joints(layout)
     rate = walk.sample_rate(meta, cfg)
     traces = clip_metrics.gait_traces(state, cfg, layout, ds.val, tuple(meta["style_names"]), feet, rate, seconds=2.0)
@@ -245,7 +244,7 @@ def test_gait_traces_and_plot_gait(repo, tiny_run, tmp_path, capsys):
         step = cfg.data.frame_step
         real = np.asarray(representation.from_rows(clip.root_Fx3[: (n - 1) * step + 1: step],
                                                    clip.pose_FxR[: (n - 1) * step + 1: step], layout))
-        np.testing.assert_allclose(t.real_heights_Tx2, metrics.toe_heights(real[:, list(feet)]), atol=1e-9)
+        np.testing.assert_allclose(t.real_heights_Tx2, gait.toe_heights(real[:, list(feet)]), atol=1e-9)
     plot = _load_cli(repo, "plot_gait")
     assert plot(["--workdir", str(tiny_run), "--out", str(tmp_path / "gait.png"), "--seconds", "2"]) == 0
     assert (tmp_path / "gait.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

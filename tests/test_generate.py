@@ -22,8 +22,9 @@ from conftest import random_run as _random_run
 from motiongan_jax.config import load_config, override, to_dict
 from motiongan_jax.data import curves, synthetic
 from motiongan_jax.generate import limits, styles, user_curves, walk, writers
-from motiongan_jax.motion import bvh, ik, kinematics, representation
-from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import bvh, ik, kinematics, representation, trajectory
+from motiongan_jax.train import checkpoint
 from motiongan_jax.train import state as train_state
 
 T_LONG = 96
@@ -110,7 +111,7 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
     np.testing.assert_allclose(w[4], (w[0].astype(float) + w[1]) / 2, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(w[5], w[6].astype(float) - w[7] + w[8], rtol=1e-6, atol=1e-12)
     # the same as the Latent Transform with z = 0
-    direct = np.asarray(inference.latent_w(state, np.array([names.index("Sad")])))[0]
+    direct = np.asarray(model_apply.style_codes(state, np.array([names.index("Sad")])))[0]
     np.testing.assert_allclose(w[0], direct, rtol=1e-6, atol=1e-12)
     # a raw w file, and one of the wrong size (incompatible with this checkpoint)
     np.save(tmp_path / "w.npy", w[1])
@@ -120,7 +121,7 @@ def test_style_codes_mix_endpoints_are_exact_and_arithmetic_is_in_w(run, tmp_pat
     with pytest.raises(styles.StyleError, match=f"has {styles.w_dim(state) + 3} values.*w has {styles.w_dim(state)}"):
         styles.spec_codes(state, [styles.parse_style(str(tmp_path / "bad.txt"), names)], names)
     # z modes
-    z_dim = inference.generator_z_dim(state)
+    z_dim = model_apply.z_dim(state)
     chex.assert_shape(styles.z_codes(state, "zero"), (1, z_dim))
     assert not np.any(styles.z_codes(state, "zero"))
     np.testing.assert_array_equal(styles.z_codes(state, "seed", 3), styles.z_codes(state, "seed", 3))
@@ -230,8 +231,8 @@ def test_a_curve_six_windows_long_walks_on_the_floor(run):
     # the root starts at the curve's start on the floor plan and follows G's velocity after it
     np.testing.assert_allclose(out.positions[0, 0, 0, [0, 2]], curve[0, [0, 2]], atol=1e-6)
     np.testing.assert_allclose(np.diff(out.positions[0, :, 0], axis=0), out.root_velocity[0, 1:], atol=1e-9)
-    # the root is curves.integrate from the curve start (y = 0), lifted by the floor shift
-    root = np.asarray(curves.integrate(curve[:1] * [1, 0, 1], out.root_velocity.astype(np.float32)))[0]
+    # the root is trajectory.integrate from the curve start (y = 0), lifted by the floor shift
+    root = np.asarray(trajectory.integrate(curve[:1] * [1, 0, 1], out.root_velocity.astype(np.float32)))[0]
     np.testing.assert_allclose(out.positions[0, :, 0] - [0, out.floor_shift_m[0], 0], root, rtol=1e-5, atol=1e-4)
     # more motions x samples than one call may hold: refused before G runs
     with pytest.raises(limits.GenerateError, match=r"9 motions x 36,000 samples = 324,000 are more than the limit"):
@@ -318,7 +319,7 @@ def gait_model(repo):
     state = train_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
     from motiongan_jax.nn.walker import STRIDE_GAIN
 
-    g = inference.generator(state)
+    g = model_apply.generator(state)
     w = styles.spec_codes(state, [styles.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     g.stride_head.kernel[...] = (np.linalg.pinv(w) @ (np.log([0.8, 1.4]) / STRIDE_GAIN))[:, None]
     return state.replace(g_params=nnx.state(g, nnx.Param)), layout
@@ -375,8 +376,8 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     restarted clock: the phase, not the statistics, is what a restart would break."""
     state, layout = gait_model
     M, L = 1530, 1024
-    monkeypatch.setattr(walk, "_apply_g", _compiled_fast(walk._apply_g))
-    real = walk._apply_g
+    monkeypatch.setattr(walk, "_apply_g", _compiled_fast(model_apply.g_apply))
+    real = model_apply.g_apply
     full = _wandering(1536, straight_from=1500)
     w = styles.spec_codes(state, [styles.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     phi0 = np.array([0.5, 4.0])
@@ -395,10 +396,10 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     np.testing.assert_allclose(one.pose, ref.pose[:, :M], atol=1e-5 * scale)
     np.testing.assert_allclose(one.root_velocity, ref.root_velocity[:, :M], atol=1e-5 * scale)
     # one clock: the phase G walks in each chunk is one pass's
-    g = inference.generator(state)
+    g = model_apply.generator(state)
     np.testing.assert_allclose(np.exp(np.asarray(g.log_stride(jax.numpy.asarray(w)))), [0.8, 1.4], rtol=1e-4)
-    clock = np.asarray(g.walked_phase(curves.velocity(jax.numpy.asarray(np.stack([full] * 2))), jax.numpy.asarray(w),
-                                      jax.numpy.asarray(phi0, jax.numpy.float32)))
+    vel = trajectory.velocity(jax.numpy.asarray(np.stack([full] * 2)))
+    clock = np.asarray(g.walked_phase(vel, jax.numpy.asarray(w), jax.numpy.asarray(phi0, jax.numpy.float32)))
     for (v, ww, ph), s in zip(calls, (0, 512)):
         err = np.abs(_wrap(np.asarray(g.walked_phase(v, ww, ph)) - clock[:, s:s + L])).max()
         assert err < 1e-3, (s, err)
@@ -415,7 +416,7 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     assert np.abs(height(ch) - height(one)).max() < 0.04
     # where the second chunk alone is used, a restarted clock is far further off than the statistics
     tail = slice(512 + walk.CHUNK_MARGIN + walk.CHUNK_FADE, M)
-    restarted = np.asarray(real(inference.generator_state(state), v1, w1, restart)[1])[:, tail.start - 512:M - 512]
+    restarted = np.asarray(real(model_apply.generator_state(state), v1, w1, restart)[1])[:, tail.start - 512:M - 512]
     assert rel(restarted, one.pose[:, tail]) > 10 * rel(ch.pose[:, tail], one.pose[:, tail])
     # no seam: where the chunks blend, pose, root velocity and height change no faster than elsewhere
     seam = slice(512 + walk.CHUNK_MARGIN, 1024 - walk.CHUNK_MARGIN)

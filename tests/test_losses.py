@@ -10,8 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from motiongan_jax.data import curves
-from motiongan_jax.motion import representation
+from motiongan_jax.motion import representation, trajectory
 from motiongan_jax.train import losses
 
 
@@ -64,7 +63,7 @@ def test_class_loss_hand():
 
 def test_curve_loss_zero_when_velocity_integrates_to_curve():
     c = jax.random.normal(jax.random.key(0), (3, 16, 3)) * 2.0
-    v = curves.velocity(c).at[:, 0].set(123.0)  # v[0] is ignored by the convention
+    v = trajectory.velocity(c).at[:, 0].set(123.0)  # v[0] is ignored by the convention
     assert float(losses.curve_loss(v, c, 4, 0.056444)) < 1e-6
 
 

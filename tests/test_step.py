@@ -15,8 +15,11 @@ from conftest import FAST
 from flax import nnx
 
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import build as model_build
+from motiongan_jax.motion import trajectory
 from motiongan_jax.nn import SpectralNormState
-from motiongan_jax.train import inference, objectives
+from motiongan_jax.train import objectives
 from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
@@ -127,7 +130,7 @@ def test_abstract_init_matches(setup):
     # checkpoint restore builds its target with jax.eval_shape(init_state)
     like = jax.eval_shape(lambda: train_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
     assert jax.tree_util.tree_structure(like) == jax.tree_util.tree_structure(setup["state0"])
-    g, d = nnx.eval_shape(lambda: train_state.build_models(CFG, J, C, jax.random.key(0)))
+    g, d = nnx.eval_shape(lambda: model_build.build_models(CFG, J, C, jax.random.key(0)))
     n_g = sum(x.size for x in jax.tree_util.tree_leaves(setup["state0"].g_params))
     assert sum(x.size for x in jax.tree_util.tree_leaves(nnx.state(g, nnx.Param))) == n_g
 
@@ -209,9 +212,10 @@ def test_generator_apply_paths_agree(setup):
     labels = jnp.array([0, 2], jnp.int32)
 
     def both(state, vel, labels):
-        w = inference.latent_w(state, labels)  # z = 0
-        by_w = inference.generator_apply(state, vel, w_BxD=w)
-        by_label = inference.generator_apply(state, vel, labels)
+        w = model_apply.style_codes(state, labels)  # z = 0
+        by_w = model_apply.g_apply(state, vel, w)
+        g = model_apply.generator(state)
+        by_label = model_apply.g_apply(state, vel, g.style(labels, jnp.zeros((B, CFG.model.z_dim))))
         return w, by_w, by_label
 
     w, by_w, by_label = jax.jit(both).lower(s3, vel, labels).compile(compiler_options=FAST)(s3, vel, labels)
@@ -232,7 +236,7 @@ def test_fake_labels_and_z():
 def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     """model.output_prior: the same parameters as the paper's G, whose outputs
     gain exactly the rest pose (pose head) and the input curve velocity (root head)."""
-    from motiongan_jax.data import curves, synthetic
+    from motiongan_jax.data import synthetic
     from motiongan_jax.motion.representation import layout_from_skeleton, rest_positions
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
@@ -240,18 +244,18 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
                                 model=ModelConfig(base_channels=4, w_dim=8, z_dim=8)))
     prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior=True))
     # the modules themselves (eager, no compile): same key, same parameters
-    rows = train_state.output_prior_rows(prior_cfg.model, layout)
-    plain = train_state._build_g(plain_cfg.model, layout.num_rel_joints, C, None, jax.random.key(3))
-    prior = train_state._build_g(prior_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    rows = model_build.output_prior_rows(prior_cfg.model, layout)
+    plain = model_build.build_generator(plain_cfg.model, layout.num_rel_joints, C, None, jax.random.key(3))
+    prior = model_build.build_generator(prior_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
     assert _leaves_equal(nnx.state(plain, nnx.Param), nnx.state(prior, nnx.Param))
     curve = _batch()["curve_BxTx3"]
     w = plain.style(jnp.array([0, 2], jnp.int32), jnp.zeros((B, 8)))
-    v0, p0 = plain(curves.velocity(curve), w)
-    v1, p1 = prior(curves.velocity(curve), w)
+    v0, p0 = plain(trajectory.velocity(curve), w)
+    v1, p1 = prior(trajectory.velocity(curve), w)
     rest_R = rest_positions(layout)[1:].reshape(-1)
     chex.assert_shape(p1, (B, T, layout.num_rows))
     np.testing.assert_allclose(np.asarray(p1 - p0), np.broadcast_to(rest_R, p1.shape), atol=1e-5)
-    np.testing.assert_allclose(np.asarray(v1 - v0), np.asarray(curves.velocity(curve)), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(v1 - v0), np.asarray(trajectory.velocity(curve)), atol=1e-6)
     # the prior's bone lengths at the rest pose are the skeleton's
     bones = np.linalg.norm(np.diff(rest_positions(layout)[np.asarray(layout.bone_pairs)], axis=1)[:, 0], axis=-1)
     np.testing.assert_allclose(bones, layout.bone_lengths_m, rtol=1e-6)
@@ -264,38 +268,38 @@ def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
     """model.g_frame = curve: same parameters as the world-frame G; rotating the input curve by
     any angle rotates root velocity and pose by that angle (the world-frame G is not); at
     initialisation, with the rest-pose prior, the body faces along the curve's smoothed heading."""
-    from motiongan_jax.data import curves, synthetic
+    from motiongan_jax.data import synthetic
     from motiongan_jax.motion.representation import layout_from_skeleton
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     world_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
                                 model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True)))
     curve_cfg = dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="curve"))
-    rows = train_state.output_prior_rows(world_cfg.model, layout)
-    world = train_state._build_g(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
-    g = train_state._build_g(curve_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    rows = model_build.output_prior_rows(world_cfg.model, layout)
+    world = model_build.build_generator(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
+    g = model_build.build_generator(curve_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
     assert _leaves_equal(nnx.state(world, nnx.Param), nnx.state(g, nnx.Param))
     # a turning path (quarter circle) walked at 1.2 m/s, 15 samples per second
     arc = jnp.linspace(0.0, np.pi / 2, T)
     curve = (4.0 * jnp.stack([jnp.sin(arc), 0 * arc, 1 - jnp.cos(arc)], -1))[None].repeat(B, 0)
-    vel = curves.velocity(curve)
+    vel = trajectory.velocity(curve)
     w = g.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
     v1, p1 = g(vel, w)
     chex.assert_shape([v1, p1], [(B, T, 3), (B, T, layout.num_rows)])
     for theta in (0.4, 2.5, -1.9):
-        v2, p2 = g(curves.rotate_y(vel, theta), w)
-        np.testing.assert_allclose(np.asarray(v2), np.asarray(curves.rotate_y(v1, theta)), atol=2e-5)
+        v2, p2 = g(trajectory.rotate_y(vel, theta), w)
+        np.testing.assert_allclose(np.asarray(v2), np.asarray(trajectory.rotate_y(v1, theta)), atol=2e-5)
         np.testing.assert_allclose(np.asarray(p2), np.asarray(
-            curves.rotate_y(p1.reshape(B, T, -1, 3), theta).reshape(p1.shape)), atol=2e-5)
-    wv2, wp2 = world(curves.rotate_y(vel, 2.5), w)
+            trajectory.rotate_y(p1.reshape(B, T, -1, 3), theta).reshape(p1.shape)), atol=2e-5)
+    wv2, wp2 = world(trajectory.rotate_y(vel, 2.5), w)
     wv1, wp1 = world(vel, w)
-    assert float(jnp.abs(wp2 - curves.rotate_y(wp1.reshape(B, T, -1, 3), 2.5).reshape(wp1.shape)).max()) > 0.1
+    assert float(jnp.abs(wp2 - trajectory.rotate_y(wp1.reshape(B, T, -1, 3), 2.5).reshape(wp1.shape)).max()) > 0.1
     # facing: the left hip minus the right hip, turned a quarter, is the walking direction
     names = layout.joint_names
     joints = p1.reshape(B, T, -1, 3)
     across = joints[:, :, names.index("LeftUpLeg") - 1] - joints[:, :, names.index("RightUpLeg") - 1]
     facing = np.arctan2(-np.asarray(across[..., 2]), np.asarray(across[..., 0]))
-    err = np.angle(np.exp(1j * (facing - np.asarray(curves.smooth_heading(vel)))))
+    err = np.angle(np.exp(1j * (facing - np.asarray(trajectory.smooth_heading(vel)))))
     assert np.abs(err).max() < np.radians(2.0)
     with pytest.raises(ValueError, match="g_frame"):
         validate(dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="body")))
@@ -326,8 +330,8 @@ def test_projection_d_judges_each_window_as_its_label(projection_ema):
     from motiongan_jax.nn.layers import leaky_relu
 
     paper_cfg, cfg, state0, train_step = projection_ema
-    d = train_state._build_d(cfg.model, T, J, C, jax.random.key(0))
-    d0 = train_state._build_d(paper_cfg.model, T, J, C, jax.random.key(0))
+    d = model_build.build_discriminator(cfg.model, T, J, C, jax.random.key(0))
+    d0 = model_build.build_discriminator(paper_cfg.model, T, J, C, jax.random.key(0))
     shared = {k: v for k, v in nnx.to_pure_dict(nnx.state(d, nnx.Param)).items() if k != "l_proj"}
     assert _leaves_equal(shared, nnx.to_pure_dict(nnx.state(d0, nnx.Param)))
     batch = _batch()
@@ -345,7 +349,7 @@ def test_projection_d_judges_each_window_as_its_label(projection_ema):
         d(vel, pose, update_stats=False)
     # d_losses: the fakes' verdict follows fake_labels_B; the paper's D ignores them
     def fake_term(model_cfg, fake_labels):
-        dd = train_state._build_d(model_cfg, T, J, C, jax.random.key(0))
+        dd = model_build.build_discriminator(model_cfg, T, J, C, jax.random.key(0))
         return float(objectives.d_losses(dd, vel, pose, batch["root_BxTx3"], pose, batch["label_B"], cfg.train,
                                        jnp.array(fake_labels, jnp.int32))["d_adv_fake"])
     assert abs(fake_term(cfg.model, [2, 3]) - fake_term(cfg.model, [0, 1])) > 1e-4
@@ -375,8 +379,9 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
     # a model with exact bones: any w, any curve, every bone has the skeleton's length
     cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
                           model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True, exact_bones=True)))
-    g = train_state._build_g(cfg.model, layout.num_rel_joints, C, train_state.output_prior_rows(cfg.model, layout),
-                          jax.random.key(1), bones=train_state.generator_bones(cfg.model, layout))
+    rest = model_build.output_prior_rows(cfg.model, layout)
+    g = model_build.build_generator(cfg.model, layout.num_rel_joints, C, rest, jax.random.key(1),
+                                    bones=model_build.generator_bones(cfg.model, layout))
     vel = jax.random.normal(jax.random.key(2), (B, T, 3)) * jnp.array([0.1, 0.0, 0.1])
     _, pose = g(vel, 3.0 * jax.random.normal(jax.random.key(4), (B, 8)))
     joints = np.concatenate([np.zeros((B, T, 1, 3)), np.asarray(pose).reshape(B, T, -1, 3)], 2)
@@ -388,7 +393,7 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
 
 def test_gait_phase_by_hand():
     """φ[t] = φ0 + 2π s[t] / λ with s[t] the horizontal distance walked to sample t (v[0] is not
-    walked, as in curves.integrate); the vertical component does not count, and a turning path
+    walked, as in trajectory.integrate); the vertical component does not count, and a turning path
     counts its arc length. Channels: sin φ, sin 2φ, cos φ, cos 2φ."""
     from motiongan_jax.nn.walker import gait_phase, walked_phase
 
@@ -413,12 +418,11 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     dc1_0, and a stride head is added, every other parameter is as before; the offset moves the
     motion, None means 0, a G without the phase refuses offsets; the stride is exp of the head
     (1 m at init); G stays exactly rotation-equivariant in the curve frame."""
-    from motiongan_jax.data import curves
     from motiongan_jax.nn.walker import PHASE_CHANNELS
 
     base = ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True, g_frame="curve")
-    plain = train_state._build_g(base, J, C, None, jax.random.key(3))
-    g = train_state._build_g(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
+    plain = model_build.build_generator(base, J, C, None, jax.random.key(3))
+    g = model_build.build_generator(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
     p_plain = dict(nnx.to_flat_state(nnx.state(plain, nnx.Param)))
     p_phase = dict(nnx.to_flat_state(nnx.state(g, nnx.Param)))
     assert set(p_phase) - set(p_plain) == {("stride_head", "kernel"), ("stride_head", "bias")}
@@ -437,10 +441,9 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     assert float(jnp.abs(p1 - p0).max()) > 1e-3
     offset = jnp.array([0.1, 3.0])
     v1, p1 = g(vel, w, offset)
-    v2, p2 = g(curves.rotate_y(vel, 1.1), w, offset)
-    np.testing.assert_allclose(np.asarray(v2), np.asarray(curves.rotate_y(v1, 1.1)), atol=2e-5)
-    np.testing.assert_allclose(np.asarray(p2),
-                               np.asarray(curves.rotate_y(p1.reshape(B, T, -1, 3), 1.1).reshape(p1.shape)), atol=2e-5)
+    v2, p2 = g(trajectory.rotate_y(vel, 1.1), w, offset)
+    np.testing.assert_allclose(np.asarray(v2), np.asarray(trajectory.rotate_y(v1, 1.1)), atol=2e-5)
+    np.testing.assert_allclose(np.asarray(p2), np.asarray(trajectory.rotate_rows_y(p1, 1.1)), atol=2e-5)
     with pytest.raises(ValueError, match="no gait phase"):
         plain(vel, w, offset)
     with pytest.raises(ValueError, match="no gait phase"):
@@ -452,8 +455,8 @@ def test_root_height_head_gives_the_velocity_as_a_difference():
     (v[0] = v[1], the velocity convention), so integrating it gives that height back up to a
     constant; x and z are the velocity head's, as without the option."""
     base = ModelConfig(base_channels=4, w_dim=8, z_dim=8)
-    g_vel = train_state._build_g(base, J, C, None, jax.random.key(3))
-    g_h = train_state._build_g(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
+    g_vel = model_build.build_generator(base, J, C, None, jax.random.key(3))
+    g_h = model_build.build_generator(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
     vel = 0.1 * jax.random.normal(jax.random.key(1), (B, T, 3))
     w = g_vel.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
     head, pose = g_vel(vel, w)  # the same parameters: this y is the height head's output
@@ -466,7 +469,7 @@ def test_root_height_head_gives_the_velocity_as_a_difference():
 
 
 def _gait_cfg():
-    from motiongan_jax.data.dataset import GaitTargets
+    from motiongan_jax.data.gait_stats import GaitTargets
 
     cfg = validate(dataclasses.replace(
         CFG, model=dataclasses.replace(CFG.model, base_channels=4, g_frame="curve", gait_phase=True, root_height=True,
@@ -487,7 +490,8 @@ def _gait_step(rec_z: str):
     cfg = validate(dataclasses.replace(cfg0, train=dataclasses.replace(
         cfg0.train, w_g_rec=1.0, rec_z=rec_z, w_g_root_jerk=1.0, w_g_joint_jerk=1.0)))
     batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
-             "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2}
+             "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2,
+             "rec_B": jnp.arange(B) < objectives.reconstructed_rows(cfg.train)}
     state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
     # at init w barely depends on z: a larger latent transform lets the two choices differ
     g_params = jax.tree.map(lambda x: x, state0.g_params)
@@ -530,7 +534,7 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
     from motiongan_jax.nn.walker import STRIDE_GAIN
 
     labels, z = _fake_labels_and_z(cfg, batch, GAIT_KEY)
-    g0 = inference.generator(state0)
+    g0 = model_apply.generator(state0)
     w = np.asarray(g0.style(labels, z))
     err = np.asarray(g0.log_stride(jnp.asarray(w))) - np.log(np.asarray(gait.stride_m_C))[np.asarray(labels)]
     assert float(m["g_stride"]) == pytest.approx(np.mean(err**2), rel=1e-5)
@@ -549,16 +553,15 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
 def test_reconstructed_half_at_zero_or_sampled_z_and_the_jerk_terms():
     # The step's g_rec and jerk terms recomputed outside it, from G before the update: the first
     # window asks for its own style at its own phase, with z = 0 or with the z drawn for it.
-    from motiongan_jax.data import curves
     from motiongan_jax.motion.representation import LENGTH_UNIT_M
     from motiongan_jax.train import losses
 
     g_rec = {}
     for rec_z in ("zero", "sampled"):
         cfg, _, batch, state0, _, m = _gait_step(rec_z)
-        curve_vel, real_vel = curves.velocity(batch["curve_BxTx3"]), curves.velocity(batch["root_BxTx3"])
+        curve_vel, real_vel = trajectory.velocity(batch["curve_BxTx3"]), trajectory.velocity(batch["root_BxTx3"])
         labels, z = _fake_labels_and_z(cfg, batch, GAIT_KEY)
-        g = inference.generator(state0)
+        g = model_apply.generator(state0)
         w = g.style(labels, z)
         offset = objectives.sample_phase(cfg, B, GAIT_KEY)
         phase_BxT = g.walked_phase(curve_vel, w, offset).at[0].set(batch["phase_BxT"][0])

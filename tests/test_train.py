@@ -18,9 +18,11 @@ import pytest
 from conftest import assert_bit_identical, load_cli, run_cli
 
 from motiongan_jax.config import override, to_dict
-from motiongan_jax.data import curves
-from motiongan_jax.data import dataset as data
-from motiongan_jax.train import checkpoint, health, inference
+from motiongan_jax.data import sampling
+from motiongan_jax.generate.preview import preview_curve, previewer
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import trajectory
+from motiongan_jax.train import checkpoint, health
 from motiongan_jax.train import loop as train_lib
 
 
@@ -54,7 +56,7 @@ def test_run_writes_metrics_checkpoints_and_lists(unbroken, tiny):
 
 def test_other_seed_other_parameters(unbroken, tiny, tmp_path):
     train_lib.train(override(tiny, ["train.seed=1", "train.num_steps=2", "train.preview_every=2"]), tmp_path,
-                    progress=False, log=lambda s: None)
+                    progress=False, log=lambda s: None, preview=previewer)
     gif = tmp_path / "previews" / "step_0000002.gif"
     assert gif.read_bytes()[:6] == b"GIF89a"
     a, _ = _params(unbroken, 2)
@@ -120,7 +122,7 @@ def test_sigkill_and_restart_equals_unbroken(unbroken, repo, tmp_path):
 
 
 def test_non_finite_stops_with_step_and_term(tiny, tmp_path, monkeypatch):
-    real = data.make_sample_batch
+    real = sampling.make_sample_batch
 
     def poisoned(cfg, batch_size):
         sample = real(cfg, batch_size)
@@ -132,7 +134,7 @@ def test_non_finite_stops_with_step_and_term(tiny, tmp_path, monkeypatch):
 
         return sample_batch
 
-    monkeypatch.setattr(data, "make_sample_batch", poisoned)
+    monkeypatch.setattr(sampling, "make_sample_batch", poisoned)
     with pytest.raises(train_lib.NonFiniteError, match=r"step 3: .*g_curve"):
         train_lib.train(tiny, tmp_path, progress=False, log=lambda s: None)
     assert checkpoint.manager(tmp_path / "checkpoints").latest_step() == 2
@@ -148,12 +150,12 @@ def test_labels_keep_their_embeddings_and_g_follows_its_code_after_training(unbr
     emb_CxZ = np.asarray(state.g_params["latent"]["embed"])
     gap = min(np.abs(emb_CxZ[a] - emb_CxZ[b]).max() for a in range(C) for b in range(a))
     assert gap > 0.05 * np.abs(emb_CxZ).max(), gap  # random init, moved by 4 Adam steps of 2e-4 at most
-    w_CxD = np.asarray(inference.latent_w(state, jax.numpy.arange(C)))
+    w_CxD = np.asarray(model_apply.style_codes(state, jax.numpy.arange(C)))
     # a step of 0.1 along w1 - w0 (the codes' spread in a longer run) moves the pose by 0.82-1.13 of
     # its size (5 seeds, SSE4.2 kernels), far from the 0.1 asked
-    vel = curves.velocity(jax.numpy.asarray(train_lib.preview_curve(T, 0.08))[None]).repeat(2, 0)
+    vel = trajectory.velocity(jax.numpy.asarray(preview_curve(T, 0.08))[None]).repeat(2, 0)
     u = (w_CxD[1] - w_CxD[0]) / np.linalg.norm(w_CxD[1] - w_CxD[0])
-    _, pose = inference.generator_apply(state, vel, w_BxD=jax.numpy.asarray(np.stack([w_CxD[0], w_CxD[0] + 0.1 * u])))
+    _, pose = model_apply.g_apply(state, vel, jax.numpy.asarray(np.stack([w_CxD[0], w_CxD[0] + 0.1 * u])))
     diff = float(np.abs(pose[0] - pose[1]).mean() / np.abs(pose[0]).mean())
     assert diff > 0.1, diff
 
@@ -208,13 +210,13 @@ def test_training_on_one_batch_makes_g_follow_its_curves(tiny, tmp_path, monkeyp
     """The loop (data, step, Adam) fed one batch over and over: G learns to walk its curves. (On
     fresh batches 100 tiny steps lower the curve loss by 0-40% depending on the seed, a trend the
     rounding of another CPU can undo; on one batch it falls ~500x.)"""
-    real = data.make_sample_batch
+    real = sampling.make_sample_batch
 
     def first_batch_only(cfg, batch_size):
         sample = real(cfg, batch_size)
         return lambda arrays, key, step: sample(arrays, key, 0)
 
-    monkeypatch.setattr(data, "make_sample_batch", first_batch_only)
+    monkeypatch.setattr(sampling, "make_sample_batch", first_batch_only)
     # G's learning rate is raised (2e-4 -> 1e-3) so that 100 tiny steps get there
     cfg = override(tiny, ["train.num_steps=100", "train.checkpoint_every=100", "train.batch_size=8",
                           "train.lr_g=1e-3"])
@@ -302,3 +304,38 @@ def test_the_loop_warns_of_an_upset_and_generation_uses_the_checkpoint_before_it
     # without the log there is nothing to go by: the latest checkpoint
     (tmp_path / "metrics.jsonl").unlink()
     assert checkpoint.resolve_step(tmp_path) == 6
+
+
+DEFAULT_XLA_RESUME = """
+import json, os, sys
+import jax, numpy as np
+import orbax.checkpoint as ocp
+jax.config.update("jax_compilation_cache_dir", sys.argv[2])  # the 3 runs compile one program
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+from motiongan_jax.config import override, tiny
+from motiongan_jax.train.loop import train
+wd, cfg = sys.argv[1], override(tiny(), ["train.g_ema_decay=0.5"])
+train(cfg, wd + "/unbroken", progress=False, log=lambda s: None)
+train(override(cfg, ["train.num_steps=2"]), wd + "/resumed", progress=False, log=lambda s: None)
+train(cfg, wd + "/resumed", progress=False, log=lambda s: None)
+# the saved states as stored (no model rebuilt: nothing else compiles here)
+a, b = (ocp.StandardCheckpointer().restore(os.path.abspath(wd + d + "/checkpoints/4/state"))
+        for d in ("/unbroken", "/resumed"))
+la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+print(json.dumps({"leaves": len(la), "equal": sum(np.array_equal(x, y) for x, y in zip(la, lb)),
+                  "xla_flags": os.environ.get("XLA_FLAGS")}))
+"""
+
+
+def test_resume_equals_unbroken_compiled_as_users_compile(tmp_path):
+    """The suite compiles with faster XLA options (conftest.FAST); users compile with XLA's defaults.
+    Resumed ≡ unbroken holds there too: a process with no XLA_FLAGS trains the tiny config (with a
+    moving average of G) 4 steps unbroken and 2 + 2 steps resumed, and every leaf of the two states
+    is equal."""
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR")}
+    out = subprocess.run([sys.executable, "-c", DEFAULT_XLA_RESUME, str(tmp_path), str(tmp_path / "xla_cache")],
+                         env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result["xla_flags"] is None
+    assert result["leaves"] > 300 and result["equal"] == result["leaves"], result

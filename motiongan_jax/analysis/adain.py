@@ -12,13 +12,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from motiongan_jax.model import apply as model_apply
 from motiongan_jax.nn.layers import AdaIN
-from motiongan_jax.train import inference
 
 
 def adain_styles(state, w_BxD) -> dict[str, tuple[jax.Array, jax.Array]]:
     """(s, b) of every AdaIN layer of G for the codes w, keyed by block name."""
-    return inference.generator(state).adain_styles(jnp.asarray(w_BxD, jnp.float32))
+    return model_apply.generator(state).adain_styles(jnp.asarray(w_BxD, jnp.float32))
 
 
 def blend_adain(styles: Sequence[dict], weights) -> dict[str, tuple[jax.Array, jax.Array]]:
@@ -48,7 +48,7 @@ def generator_apply_adain(state, curve_vel_BxTx3, adain: dict, w_BxD=None):
     Layers not in `adain` use `w_BxD` (required then). Works on a private copy of G: the AdaIN
     modules of that copy are swapped for fixed ones (nn/generator.py has no override hook).
     """
-    g = inference.generator(state)
+    g = model_apply.generator(state)
     unknown = set(adain) - set(g.BLOCKS)
     if unknown:
         raise ValueError(f"unknown AdaIN block(s) {sorted(unknown)}; G has {g.BLOCKS}")

@@ -14,6 +14,7 @@ import numpy as np
 
 from motiongan_jax.analysis.style_space import AnalysisError
 from motiongan_jax.data import curves
+from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import RowLayout, to_rows
 
 
@@ -56,7 +57,7 @@ def windows_from_rows(root_Fx3, pose_FxR, *, T: int, frame_step: int, interval: 
     path_frames = starts[:, None] + np.arange(span)[None, :]
     xz = _clean_curves(root[path_frames][..., [0, 2]], np.full(count, span, np.int32), T=int(T),
                        interval=int(interval))
-    curve = curves.on_floor(xz)
+    curve = trajectory.on_floor(xz)
     return MotionWindows(jnp.asarray(root[frames]), jnp.asarray(pose[frames]), curve.astype(jnp.float32),
                          starts, int(frame_step), source)
 
@@ -65,21 +66,20 @@ def load_motion(path, meta: dict, cfg, layout: RowLayout, *, units_to_m: float |
                 clip: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """(root_Fx3, pose_FxR, fps) in metres of a BVH file or an .npz of world positions.
 
-    BVH: preprocessed as in training (data.preprocess_clip with the run's units and start
+    BVH: preprocessed as in training (clip_cache.preprocess_clip with the run's units and start
     offset; no cache). Its kept joints must be the model's. npz: `positions` (F x J x 3, metres),
     either the model's kept joints in order or a full skeleton with `joint_names` (e.g. the
     output of bin/prepare_data.py; `clip_start`/`clip_length` select clip `clip`); `fps`
     defaults to the run's.
     """
-    from motiongan_jax.data import dataset as data
-
+    from motiongan_jax.data import clip_cache, file_labels
     path = Path(path)
     if not path.is_file():
         raise AnalysisError(f"{path}: no such file")
     names = tuple(layout.joint_names)
     if path.suffix.lower() == ".bvh":
-        units = data.units_for(cfg.data) if units_to_m is None else float(units_to_m)
-        c = data.preprocess_clip(path, data.FileLabel(style="?", trial=0), units, cfg.data.start_offset,
+        units = clip_cache.units_for(cfg.data) if units_to_m is None else float(units_to_m)
+        c = clip_cache.preprocess_clip(path, file_labels.FileLabel(style="?", trial=0), units, cfg.data.start_offset,
                                  use_cache=False)
         if tuple(c.layout.joint_names) != names:
             raise AnalysisError(f"{path}: its skeleton keeps joints {c.layout.joint_names}, the model "

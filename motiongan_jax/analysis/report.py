@@ -9,7 +9,6 @@ parses its arguments and prints a summary.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import tempfile
 from pathlib import Path
@@ -22,7 +21,6 @@ from motiongan_jax.analysis import clips, style_space
 from motiongan_jax.analysis import probe as probe_lib
 from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.data import curves
-from motiongan_jax.evaluation import report as eval_report
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.train import pretrained
 
@@ -65,9 +63,6 @@ def _search_curve(text: str, spacing: float, T: int):
     raise style_space.AnalysisError(f"--search-curve: {text!r} is neither a shape ({', '.join(curves.SHAPES)}) nor a "
                           ".csv/.json curve file")
 
-
-def _write_json(path: Path, obj) -> None:
-    atomic.write_text(path, json.dumps(eval_report.to_jsonable(obj), indent=1, allow_nan=False) + "\n")
 
 
 def write_analysis(out, *, workdir=None, model=None, step: int | None = None, params: str = "ema", k: int = 10,
@@ -154,7 +149,7 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
         if true_style is not None:
             order = [n for n, _ in search_lib.nearest_to(res.w_D, codes, k=C)]
             found_report["file_name_style_rank"] = order.index(true_style) + 1
-        _write_json(out / "search.json", found_report)
+        atomic.write_json(out / "search.json", found_report)
         with atomic.atomic_path(out / "search.npz") as tmp, open(tmp, "wb") as fh:
             np.savez(fh, w=res.w_D, positions=walk["positions_TxJx3"], root=walk["root_Tx3"],
                      pose=walk["pose_TxR"], curve=walk["curve_Tx3"], joint_names=np.array(layout.joint_names),
@@ -171,5 +166,5 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
                        title=f"Style codes w, {C} styles x {k} (step {int(state.step)})")
     viz.plot_distance_heatmap(dist, names, out / "heatmap.png")
     atomic.write_text(out / "nearest.md", style_space.nearest_markdown(nearest))
-    _write_json(out / "analysis.json", report)
+    atomic.write_json(out / "analysis.json", report)
     return report

@@ -26,8 +26,9 @@ from motiongan_jax.analysis.clips import MotionWindows
 from motiongan_jax.analysis.style_space import AnalysisError, StyleCodes
 from motiongan_jax.data import curves
 from motiongan_jax.generate import walk
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M, RowLayout
-from motiongan_jax.train import inference
 
 
 def search_schedule(peak_lr: float, steps: int, warmup: int):
@@ -54,8 +55,8 @@ def reconstruction_loss(root_vel_NxTx3, pose_NxTxR, target: MotionWindows, *, ve
                         length_unit: float = LENGTH_UNIT_M):
     """vel_weight · MSE(v̂, u) + MSE(P̂, P) per window, lengths in `length_unit` (the losses' CMU
     unit), as in the reference's search. v[0] is left out: it is a reflected duplicate, not a
-    step (curves.velocity)."""
-    return _window_losses(root_vel_NxTx3, pose_NxTxR, curves.velocity(target.root_NxTx3),
+    step (trajectory.velocity)."""
+    return _window_losses(root_vel_NxTx3, pose_NxTxR, trajectory.velocity(target.root_NxTx3),
                           target.pose_NxTxR, vel_weight, length_unit)
 
 
@@ -68,7 +69,7 @@ def _search_scan(gstate, vel_NxTx3, u_NxTx3, pose_NxTxR, u0_SxD, center_D, scale
 
     def losses_S(p_SxD):
         w = center_D + scale_D * p_SxD
-        rv, pose = inference.generator_apply(gstate, vel, w_BxD=jnp.repeat(w, N, axis=0))
+        rv, pose = model_apply.g_apply(gstate, vel, jnp.repeat(w, N, axis=0))
         return jnp.mean(_window_losses(rv, pose, u, pose_t, vel_weight, length_unit).reshape(S, N), axis=1)
 
     def total(p):
@@ -146,8 +147,8 @@ def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence
     chex.assert_shape([center, scale], (D,))
     # numpy in: one jit cache entry whatever device computation made the inputs
     host = lambda x: np.asarray(x, np.float32)  # noqa: E731
-    w, final, hist = _search_scan(inference.generator_state(state), host(curves.velocity(target.curve_NxTx3)),
-                                  host(curves.velocity(target.root_NxTx3)), host(target.pose_NxTxR),
+    w, final, hist = _search_scan(model_apply.generator_state(state), host(trajectory.velocity(target.curve_NxTx3)),
+                                  host(trajectory.velocity(target.root_NxTx3)), host(target.pose_NxTxR),
                                   host((w0 - center) / scale), host(center), host(scale), host(lr),
                                   host(vel_weight), host(length_unit), steps=int(steps),
                                   warmup=int(warmup), record_every=int(record_every))
@@ -205,7 +206,7 @@ def reconstruct(state, target: MotionWindows, w_D):
     N = target.curve_NxTx3.shape[0]
     # numpy in: the same jit cache entry whether w comes from numpy or from a device computation
     w = np.broadcast_to(np.asarray(w_D, np.float32), (N, np.shape(w_D)[-1]))
-    return walk.apply_code(state, curves.velocity(target.curve_NxTx3), w)
+    return model_apply.apply_code(state, trajectory.velocity(target.curve_NxTx3), w)
 
 
 def generate_along(state, layout: RowLayout, w_D, curve_xz_Px2, *, spacing_m: float,
@@ -219,7 +220,7 @@ def generate_along(state, layout: RowLayout, w_D, curve_xz_Px2, *, spacing_m: fl
     if len(xz) < 2:
         raise AnalysisError(f"the curve gives {len(xz)} sample at {spacing_m:.3g} m per sample; a walk "
                             f"needs at least 2 (draw a longer curve)")
-    curve = curves.on_floor(xz).astype(np.float32)
+    curve = trajectory.on_floor(xz).astype(np.float32)
     gen = walk.generate_motion(state, layout, curve, np.reshape(np.asarray(w_D, np.float32), (1, -1)))
     positions = gen.positions[0].copy()
     positions[..., 1] += float(start_height_m) - gen.floor_shift_m[0]

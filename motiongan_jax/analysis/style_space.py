@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from motiongan_jax.generate import styles
-from motiongan_jax.train import inference
+from motiongan_jax.model import apply as model_apply
 
 
 class AnalysisError(ValueError):
@@ -52,7 +52,7 @@ def label_codes(state, style_names: Sequence[str], k: int = 10, key: jax.Array |
     C = len(style_names)
     if C < 1 or k < 1:
         raise ValueError(f"need at least one style and k >= 1 (got {C} styles, k={k})")
-    Z = inference.generator_z_dim(state)
+    Z = model_apply.z_dim(state)
     labels = jnp.arange(C, dtype=jnp.int32)
     zero = styles.latent_codes(state, labels, jnp.zeros((C, Z), jnp.float32))
     rep = jnp.repeat(labels, k)

@@ -35,8 +35,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from motiongan_jax.config import ConfigError
-    from motiongan_jax.data import curves
-    from motiongan_jax.data import dataset as data
+    from motiongan_jax.data import curves, file_labels
     from motiongan_jax.evaluation import evaluator, protocol
     from motiongan_jax.evaluation import report as eval_report
     from motiongan_jax.generate import limits
@@ -59,7 +58,7 @@ def main(argv=None) -> int:
         report, ctx = protocol.evaluate_run(args.workdir, settings, shapes, step=args.step, params=args.params,
                                               data_dir=args.data, evaluator_path=args.evaluator,
                                               cmu_curves=args.cmu_curves)
-    except (ConfigError, data.DataError, BVHError, checkpoint.CheckpointError, evaluator.EvaluatorError,
+    except (ConfigError, file_labels.DataError, BVHError, checkpoint.CheckpointError, evaluator.EvaluatorError,
             protocol.EvaluationError, limits.GenerateError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -26,7 +26,7 @@ def main(argv=None) -> int:
 
     from motiongan_jax import viz
     from motiongan_jax.config import ConfigError
-    from motiongan_jax.data import dataset as data
+    from motiongan_jax.data import clip_cache, file_labels, gait_stats
     from motiongan_jax.evaluation import clip_metrics
     from motiongan_jax.generate import limits, walk
     from motiongan_jax.motion import representation
@@ -38,19 +38,19 @@ def main(argv=None) -> int:
         state, meta, cfg, layout = checkpoint.load_run(args.workdir, args.step, args.params)
         if args.data is not None:
             cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=args.data))
-        dataset = data.load_dataset(cfg.data)
+        dataset = clip_cache.load_dataset(cfg.data)
         if not dataset.val:
-            raise data.DataError("the validation split is empty: no held-out clip to compare with")
+            raise file_labels.DataError("the validation split is empty: no held-out clip to compare with")
         feet = representation.foot_joints(layout)
         rate = walk.sample_rate(meta, cfg)
         traces = clip_metrics.gait_traces(state, cfg, layout, dataset.val, tuple(meta["style_names"]), feet, rate,
                                         args.seconds)
         if not traces:
-            raise data.DataError("no held-out clip is long enough for a trace")
-        contact = data.contact_height(dataset.train, layout, feet)
+            raise file_labels.DataError("no held-out clip is long enough for a trace")
+        contact = gait_stats.contact_height(dataset.train, layout, feet)
         viz.plot_gait(traces, args.out, sample_rate=rate, contact_height_m=contact,
                       title=f"{cfg.name}: toe heights above the floor, real held-out clips and G on their paths")
-    except (ConfigError, data.DataError, checkpoint.CheckpointError, limits.GenerateError, ValueError) as err:
+    except (ConfigError, file_labels.DataError, checkpoint.CheckpointError, limits.GenerateError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"wrote {args.out}")

@@ -10,7 +10,7 @@ import argparse
 import sys
 
 from motiongan_jax.config import LabelRule, choices
-from motiongan_jax.data.dataset import DataError
+from motiongan_jax.data.file_labels import DataError
 from motiongan_jax.data.positions_npz import write_positions_npz
 from motiongan_jax.motion.bvh import BVHError
 

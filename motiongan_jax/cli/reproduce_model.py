@@ -23,7 +23,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from motiongan_jax.config import ConfigError, from_dict, validate
-    from motiongan_jax.data.dataset import DataError
+    from motiongan_jax.data.file_labels import DataError
     from motiongan_jax.train import pretrained
     from motiongan_jax.train.checkpoint import CheckpointError
     from motiongan_jax.train.loop import train

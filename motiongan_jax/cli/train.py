@@ -36,7 +36,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     from motiongan_jax.config import ConfigError, load_config, override, validate
-    from motiongan_jax.data.dataset import DataError
+    from motiongan_jax.data.file_labels import DataError
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.train import parallel
     from motiongan_jax.train.checkpoint import CheckpointError
@@ -56,11 +56,12 @@ def main(argv=None) -> int:
 
             print(describe(cfg))
             return 0
+        from motiongan_jax.generate.preview import previewer
         from motiongan_jax.train.loop import NonFiniteError, train
 
         # several processes: from the flags, the variables or the launcher (docs/PERFORMANCE.md)
         parallel.initialize_distributed(args.coordinator, args.num_processes, args.process_id)
-        last = train(cfg, args.workdir, progress=not args.no_progress)
+        last = train(cfg, args.workdir, progress=not args.no_progress, preview=previewer)
         primary = parallel.is_primary()
     except (ConfigError, DataError, BVHError, CheckpointError, parallel.DistributedError) as err:
         print(f"error: {err}", file=sys.stderr)

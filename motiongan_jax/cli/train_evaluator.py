@@ -40,7 +40,7 @@ def main(argv=None) -> int:
         override,
         validate,
     )
-    from motiongan_jax.data import dataset as data
+    from motiongan_jax.data import clip_cache, file_labels, sampling
     from motiongan_jax.evaluation import evaluator, metrics
     from motiongan_jax.motion.bvh import BVHError
 
@@ -61,12 +61,12 @@ def main(argv=None) -> int:
         if ecfg.steps < 1:
             raise ConfigError("--steps must be positive")
 
-        dataset = data.load_dataset(cfg.data)
+        dataset = clip_cache.load_dataset(cfg.data)
         if not dataset.val:
-            raise data.DataError("the validation split is empty: nothing to measure the evaluator on "
+            raise file_labels.DataError("the validation split is empty: nothing to measure the evaluator on "
                                  "(check data.val_modulus / data.val_remainder)")
-        arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
-        sample = jax.jit(data.make_sample_batch(dataclasses.replace(cfg.data, rotate=False), ecfg.batch_size))
+        arrays = sampling.build_arrays(dataset.train, dataset.style_names, cfg.data)
+        sample = jax.jit(sampling.make_sample_batch(dataclasses.replace(cfg.data, rotate=False), ecfg.batch_size))
         T, step = cfg.data.window_T, cfg.data.frame_step
         ev = evaluator.train(lambda k, i: sample(arrays, k, i), dataset.layout.num_rows, dataset.style_names, ecfg,
                              log=print, meta={
@@ -78,13 +78,13 @@ def main(argv=None) -> int:
                                  "val_files": sorted(Path(c.source).name for c in dataset.val)})
         root, pose, labels, _ = evaluator.real_windows(dataset.val, dataset.style_names, T, step)
         if len(root) == 0:
-            raise data.DataError(f"no validation clip is long enough for one window of {T} samples")
+            raise file_labels.DataError(f"no validation clip is long enough for one window of {T} samples")
         logits, _ = evaluator.classify(ev, root, pose)
         sra = metrics.style_recognition(logits, labels)
         ev.meta["real_heldout"] = {"windows": int(len(labels)), "top1": sra["top1"], "top3": sra["top3"],
                                    "chance": 1.0 / dataset.num_styles}
         npz, side = evaluator.save(ev, out)
-    except (ConfigError, data.DataError, BVHError, evaluator.EvaluatorError) as err:
+    except (ConfigError, file_labels.DataError, BVHError, evaluator.EvaluatorError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"real held-out windows: {len(labels)}; top-1 {sra['top1']:.3f}, top-3 {sra['top3']:.3f} "

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from motiongan_jax import atomic
-from motiongan_jax.data.dataset import DataError, label_from_filename
+from motiongan_jax.data.file_labels import DataError, label_from_filename
 from motiongan_jax.motion import bvh, kinematics
 from motiongan_jax.motion.representation import UNITS_TO_M
 

@@ -60,6 +60,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 from scipy.spatial.transform import Rotation
 
+from motiongan_jax.cache import cache_root
 from motiongan_jax.motion.bvh import Motion, Skeleton, write_bvh
 from motiongan_jax.motion.representation import CMU_UNIT_M
 
@@ -679,10 +680,6 @@ def write_dataset(out_dir: str | Path, *, seed: int = 0, clips_per_style: int = 
 def default_dataset_dir(seed: int = 0) -> Path:
     """$MOTIONGAN_CACHE (default ~/.cache/motiongan_jax)/synthetic-v{VERSION}-seed{seed}, generated
     with the default settings if missing. Safe when processes race: the loser uses the winner's."""
-    from motiongan_jax.data.dataset import (
-        cache_root,  # not at the top: data imports this module
-    )
-
     out = cache_root() / f"synthetic-v{VERSION}-seed{int(seed)}"
     if (out / "styles.json").is_file():
         return out

@@ -155,7 +155,7 @@ def _compilation_cache() -> None:
 
     if os.environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir:
         return
-    from motiongan_jax.data.dataset import cache_root
+    from motiongan_jax.cache import cache_root
 
     jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
 

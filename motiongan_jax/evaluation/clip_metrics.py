@@ -12,8 +12,9 @@ from motiongan_jax.analysis import clips
 from motiongan_jax.data import curves
 from motiongan_jax.evaluation import metrics
 from motiongan_jax.generate import styles, walk
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import gait
 from motiongan_jax.motion.representation import facing_joints, from_rows
-from motiongan_jax.train import inference
 
 PENETRATION_TOLERANCE_M = 0.02
 GAIT_KEYS = ("support", "lower_foot_height_m", "alternation", "step_frequency_hz", "step_amplitude_m",
@@ -22,12 +23,12 @@ GAIT_KEYS = ("support", "lower_foot_height_m", "alternation", "step_frequency_hz
 
 def gait_metrics(joints_LxJx3, feet, fps: float, contact_height: float) -> dict:
     """Does it walk: support, lower-toe height, alternation, step frequency and amplitude (toe
-    heights above the clip's own floor, metrics.toe_heights) and the root's height range."""
-    h = metrics.toe_heights(joints_LxJx3[:, list(feet)])
-    return {"support": metrics.support(h, contact_height), "lower_foot_height_m": metrics.lower_foot_height(h),
-            "alternation": metrics.alternation(h), "step_frequency_hz": metrics.step_frequency_hz(h, fps),
-            "step_amplitude_m": metrics.step_amplitude_m(h),
-            "root_height_range_m": metrics.height_range_m(joints_LxJx3[:, 0])}
+    heights above the clip's own floor, gait.toe_heights) and the root's height range."""
+    h = gait.toe_heights(joints_LxJx3[:, list(feet)])
+    return {"support": gait.support(h, contact_height), "lower_foot_height_m": gait.lower_foot_height(h),
+            "alternation": gait.alternation(h), "step_frequency_hz": gait.step_frequency_hz(h, fps),
+            "step_amplitude_m": gait.step_amplitude_m(h),
+            "root_height_range_m": gait.height_range_m(joints_LxJx3[:, 0])}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,12 +56,12 @@ def gait_traces(state, cfg, layout, val_clips, style_names, feet, sample_rate: f
         mw = clips.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=n, frame_step=step,
                                         interval=cfg.data.control_point_interval, max_windows=1)
         curve = np.asarray(mw.curve_NxTx3[0], np.float32)
-        z = jax.random.normal(jax.random.fold_in(jax.random.key(seed), c), (1, inference.generator_z_dim(state)))
+        z = jax.random.normal(jax.random.fold_in(jax.random.key(seed), c), (1, model_apply.z_dim(state)))
         gen = walk.generate_motion(state, layout, curve, np.asarray(styles.latent_codes(state, np.array([c]), z)))
         real = np.asarray(from_rows(clip.root_Fx3[: (n - 1) * step + 1: step],
                                     clip.pose_FxR[: (n - 1) * step + 1: step], layout), np.float64)
-        out.append(GaitTrace(name, clip.source, metrics.toe_heights(real[:, list(feet)]),
-                             metrics.toe_heights(gen.positions[0][:, list(feet)])))
+        out.append(GaitTrace(name, clip.source, gait.toe_heights(real[:, list(feet)]),
+                             gait.toe_heights(gen.positions[0][:, list(feet)])))
     return out
 
 
@@ -69,7 +70,7 @@ def motion_metrics(joints_LxJx3, curve_Lx3, layout, feet, fps: float, contact_he
     clip. Contacts (skating ratio, support) are toes within `contact_height` of the clip's floor."""
     toes = joints_LxJx3[:, list(feet)]
     toes_on_floor = toes.copy()
-    toes_on_floor[..., 1] = metrics.toe_heights(toes)
+    toes_on_floor[..., 1] = gait.toe_heights(toes)
     hips = facing_joints(layout)
     out = {
         "facing_error_deg": float("nan") if hips is None else metrics.facing_error_deg(joints_LxJx3, *hips),

@@ -10,9 +10,8 @@ import numpy as np
 import scipy.special
 from scipy.ndimage import gaussian_filter1d
 
-from motiongan_jax.data import curves
-from motiongan_jax.generate import walk
-from motiongan_jax.train import inference
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import trajectory
 
 PROBE_WINDOWS = 128  # real training windows the probe judges
 PROBE_SMOOTHING_SAMPLES = 2.0  # Gaussian sigma of the "no steps" window
@@ -22,7 +21,7 @@ PROBE_FLOAT_M = 0.3  # how far the "floating" window's root rises over the windo
 @jax.jit
 def _d_logit(state, vel_BxTx3, pose_BxTxR, labels_B):
     # compiled once for the five inputs (op by op, D's dispatch costs more than its compile)
-    return inference.discriminator(state)(vel_BxTx3, pose_BxTxR, update_stats=False, labels_B=labels_B)[0]
+    return model_apply.discriminator(state)(vel_BxTx3, pose_BxTxR, update_stats=False, labels_B=labels_B)[0]
 
 
 def discriminator_probe(state, batch: dict, key) -> dict:
@@ -35,15 +34,16 @@ def discriminator_probe(state, batch: dict, key) -> dict:
     as real as a walk gives G no gradient toward planted feet or the floor."""
     root, pose, labels = (np.asarray(batch[k]) for k in ("root_BxTx3", "pose_BxTxR", "label_B"))
     B, T, _ = root.shape
-    vel = np.asarray(curves.velocity(jnp.asarray(root)))
+    vel = np.asarray(trajectory.velocity(jnp.asarray(root)))
     floating = vel.copy()
     floating[:, 1:, 1] += PROBE_FLOAT_M / (T - 1)
     floating[:, 0, 1] = floating[:, 1, 1]
-    z = jax.random.normal(key, (B, inference.generator_z_dim(state)), jnp.float32)
+    z = jax.random.normal(key, (B, model_apply.z_dim(state)), jnp.float32)
     offset = (jax.random.uniform(jax.random.fold_in(key, 1), (B,), jnp.float32, 0.0, 2 * np.pi)
-              if inference.has_gait_phase(state) else None)
-    w = inference.latent_w(state, jnp.asarray(labels), z)
-    fake_vel, fake_pose = walk.apply_code(state, curves.velocity(jnp.asarray(batch["curve_BxTx3"])), w, offset)
+              if model_apply.has_gait_phase(state) else None)
+    w = model_apply.style_codes(state, jnp.asarray(labels), z)
+    curve_vel = trajectory.velocity(jnp.asarray(batch["curve_BxTx3"]))
+    fake_vel, fake_pose = model_apply.apply_code(state, curve_vel, w, offset)
     inputs = {
         "real windows": (vel, pose),
         "statue gliding along the root": (vel, np.broadcast_to(pose.mean(1, keepdims=True), pose.shape)),

@@ -32,6 +32,7 @@ from flax import nnx
 
 from motiongan_jax import atomic
 from motiongan_jax.data import curves
+from motiongan_jax.motion import trajectory
 
 FORMAT_VERSION = 1
 
@@ -57,8 +58,8 @@ class EvaluatorConfig:
 
 def canonical_pose(root_NxTx3: jax.Array, pose_NxTxR: jax.Array) -> jax.Array:
     """Root-relative rows turned about +y so that every window walks along +z: D's window frame
-    (`curves.window_frame`) of the root's velocity."""
-    return curves.window_frame(curves.velocity(root_NxTx3), jnp.asarray(pose_NxTxR))[1]
+    (`trajectory.window_frame`) of the root's velocity."""
+    return trajectory.window_frame(trajectory.velocity(root_NxTx3), jnp.asarray(pose_NxTxR))[1]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -226,7 +227,7 @@ def save(ev: Evaluator, path: str | Path) -> tuple[Path, Path]:
     with atomic.atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
     side = path.with_suffix(".json")
-    atomic.write_text(side, json.dumps({**ev.meta, "checksum": ev.checksum}, indent=2) + "\n")
+    atomic.write_json(side, {**ev.meta, "checksum": ev.checksum}, indent=2)
     return path, side
 
 

@@ -22,73 +22,12 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from motiongan_jax.motion import representation
+from motiongan_jax.motion import arrays, representation
 
 # Reference foot-skate threshold (docs/DESIGN.md §5.4): 0.5 CMU units per 15 Hz sample, in metres.
 FOOT_SKATE_THRESHOLD_M = 0.5 * representation.CMU_UNIT_M
 
 _FLOOR = (0, 2)  # x and z: the floor-plane components of a Y-up position
-
-
-# ---------------------------------------------------------------------------------------------
-# Input validation
-
-
-def _float_array(x, name: str, ndim: int, shape: tuple | None = None, min_len: int = 1) -> np.ndarray:
-    """`x` as float64 of rank `ndim`; `shape` entries that are not None must match; the leading
-    axis needs at least `min_len` entries; every value must be finite."""
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{name}: not convertible to a float array ({e})") from None
-    if a.ndim != ndim:
-        raise ValueError(f"{name}: expected rank {ndim}, got shape {a.shape}")
-    if shape is not None:
-        for axis, want in enumerate(shape):
-            if want is not None and a.shape[axis] != want:
-                raise ValueError(f"{name}: axis {axis} must have size {want}, got shape {a.shape}")
-    if a.size == 0:
-        raise ValueError(f"{name}: empty array (shape {a.shape})")
-    if a.shape[0] < min_len:
-        raise ValueError(f"{name}: needs at least {min_len} entries along axis 0, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: contains NaN or inf")
-    return a
-
-
-def _int_array(x, name: str, ndim: int) -> np.ndarray:
-    """`x` as int64 of rank `ndim`, non-empty; floats are accepted only if integer-valued."""
-    a = np.asarray(x)
-    if a.ndim != ndim:
-        raise ValueError(f"{name}: expected rank {ndim}, got shape {a.shape}")
-    if a.size == 0:
-        raise ValueError(f"{name}: empty array (shape {a.shape})")
-    if np.issubdtype(a.dtype, np.floating):
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name}: contains NaN or inf")
-        if not np.all(a == np.round(a)):
-            raise ValueError(f"{name}: expected integer values")
-    elif not (np.issubdtype(a.dtype, np.integer) or a.dtype == bool):
-        raise ValueError(f"{name}: expected integers, got dtype {a.dtype}")
-    return a.astype(np.int64)
-
-
-def _same_len(a: np.ndarray, name_a: str, b: np.ndarray, name_b: str) -> None:
-    if a.shape[0] != b.shape[0]:
-        raise ValueError(f"{name_b}: length {b.shape[0]} does not match {name_a} ({a.shape[0]})")
-
-
-def _positive(value: float, name: str, allow_zero: bool = False) -> float:
-    v = float(value)
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(f"{name}: must be {'>= 0' if allow_zero else '> 0'} and finite, got {value}")
-    return v
-
-
-def _count(value: int, name: str, minimum: int) -> int:
-    if isinstance(value, bool) or int(value) != value or value < minimum:
-        raise ValueError(f"{name}: must be an integer >= {minimum}, got {value}")
-    return int(value)
 
 
 def _floor_path(p_Tx3: np.ndarray) -> np.ndarray:
@@ -111,10 +50,10 @@ def style_recognition(logits_NxC, labels_N) -> dict:
     there are fewer than 3 classes. Ties between logits go to the lower class index, in top-1
     and top-3 alike (a stable sort), so a tie never counts as two hits.
     """
-    logits = _float_array(logits_NxC, "logits_NxC", 2)
-    labels = _int_array(labels_N, "labels_N", 1)
+    logits = arrays.float_array(logits_NxC, "logits_NxC", 2)
+    labels = arrays.int_array(labels_N, "labels_N", 1)
     n, c = logits.shape
-    _same_len(logits, "logits_NxC", labels, "labels_N")
+    arrays.same_len(logits, "logits_NxC", labels, "labels_N")
     if labels.min() < 0 or labels.max() >= c:
         raise ValueError(f"labels_N: values must lie in [0, {c}), got range [{labels.min()}, {labels.max()}]")
     order_NxC = np.argsort(-logits, axis=1, kind="stable")
@@ -141,8 +80,8 @@ def frechet_distance(feats_a_NxF, feats_b_MxF) -> float:
     covariances only if sqrtm returns non-finite values (singular covariances). A slightly
     negative result from cancellation is clipped to 0.
     """
-    a = _float_array(feats_a_NxF, "feats_a_NxF", 2, min_len=2)
-    b = _float_array(feats_b_MxF, "feats_b_MxF", 2, shape=(None, a.shape[1]), min_len=2)
+    a = arrays.float_array(feats_a_NxF, "feats_a_NxF", 2, min_len=2)
+    b = arrays.float_array(feats_b_MxF, "feats_b_MxF", 2, shape=(None, a.shape[1]), min_len=2)
     mu_a, mu_b = a.mean(axis=0), b.mean(axis=0)
     cov_a = np.atleast_2d(np.cov(a, rowvar=False))
     cov_b = np.atleast_2d(np.cov(b, rowvar=False))
@@ -162,8 +101,8 @@ def diversity(feats_NxF, num_pairs: int, seed: int = 0) -> float:
     uniform over the other N − 1 rows, so the expectation is the mean over all ordered pairs
     i ≠ j. Needs N ≥ 2.
     """
-    feats = _float_array(feats_NxF, "feats_NxF", 2, min_len=2)
-    num_pairs = _count(num_pairs, "num_pairs", 1)
+    feats = arrays.float_array(feats_NxF, "feats_NxF", 2, min_len=2)
+    num_pairs = arrays.count(num_pairs, "num_pairs", 1)
     n = feats.shape[0]
     rng = np.random.default_rng(seed)
     i = rng.integers(0, n, size=num_pairs)
@@ -176,7 +115,7 @@ def multimodality(feats_GxKxF) -> float:
     """Mean L2 distance between all unordered pairs of the K draws within each group, averaged
     over the G groups (one group = one fixed curve and style, K noise draws z). Needs K ≥ 2.
     ≈ 0 means the generator ignores z."""
-    feats = _float_array(feats_GxKxF, "feats_GxKxF", 3)
+    feats = arrays.float_array(feats_GxKxF, "feats_GxKxF", 3)
     k = feats.shape[1]
     if k < 2:
         raise ValueError(f"feats_GxKxF: needs K >= 2 draws per group, got shape {feats.shape}")
@@ -190,9 +129,9 @@ def multimodality(feats_GxKxF) -> float:
 
 
 def _two_paths(root_Tx3, curve_Tx3, min_len: int) -> tuple[np.ndarray, np.ndarray]:
-    root = _float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=min_len)
-    curve = _float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3), min_len=min_len)
-    _same_len(root, "root_Tx3", curve, "curve_Tx3")
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=min_len)
+    curve = arrays.float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3), min_len=min_len)
+    arrays.same_len(root, "root_Tx3", curve, "curve_Tx3")
     return root, curve
 
 
@@ -207,8 +146,8 @@ def trajectory_error_original(root_Tx3, curve_Tx3, every: int = 8, window: int =
     the divisor is ⌊T/every⌋. Needs T ≥ every.
     """
     root, curve = _two_paths(root_Tx3, curve_Tx3, 1)
-    every = _count(every, "every", 1)
-    window = _count(window, "window", 1)
+    every = arrays.count(every, "every", 1)
+    window = arrays.count(window, "window", 1)
     t_len = root.shape[0]
     if t_len < every:
         raise ValueError(f"root_Tx3: T = {t_len} is shorter than every = {every} "
@@ -242,25 +181,25 @@ def trajectory_error_symmetric(root_Tx3, curve_Tx3, num_points: int = 256) -> fl
     at `num_points` equal arc-length points. Unlike the original error, it is symmetric in its
     arguments, independent of timing along the path, and sees the whole of both paths (the
     original misses a root that stops short or overshoots). The paths may differ in length."""
-    root = _float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
-    curve = _float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3), min_len=2)
-    num_points = _count(num_points, "num_points", 2)
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    curve = arrays.float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3), min_len=2)
+    num_points = arrays.count(num_points, "num_points", 2)
     diff = _resample_floor_path(root, num_points) - _resample_floor_path(curve, num_points)
     return float(np.mean(np.linalg.norm(diff, axis=-1)))
 
 
 def endpoint_error(root_Tx3, curve_Tx3) -> float:
     """Floor distance (metres) between the last root position and the last curve point."""
-    root = _float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3))
-    curve = _float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3))
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3))
+    curve = arrays.float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3))
     return float(np.linalg.norm(_floor_path(root)[-1] - _floor_path(curve)[-1]))
 
 
 def path_length_ratio(root_Tx3, curve_Tx3) -> float:
     """Floor path length of the root divided by that of the curve (1 = same length).
     A curve of zero length is a ValueError (the ratio is undefined)."""
-    root = _float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
-    curve = _float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3), min_len=2)
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    curve = arrays.float_array(curve_Tx3, "curve_Tx3", 2, shape=(None, 3), min_len=2)
     curve_len = _path_length(curve)
     if curve_len <= 0.0:
         raise ValueError("curve_Tx3: zero floor path length, the ratio is undefined")
@@ -279,21 +218,11 @@ def foot_skate_original(toes_world_Tx2x3, threshold_m: float = FOOT_SKATE_THRESH
     divides by T, not T − 1). The default threshold is the reference's 0.5 CMU units ≈ 2.8 cm
     per sample; it was tuned for 15 Hz samples, so it means different speeds at other rates.
     """
-    toes = _float_array(toes_world_Tx2x3, "toes_world_Tx2x3", 3, shape=(None, 2, 3), min_len=2)
-    threshold_m = _positive(threshold_m, "threshold_m", allow_zero=True)
+    toes = arrays.float_array(toes_world_Tx2x3, "toes_world_Tx2x3", 3, shape=(None, 2, 3), min_len=2)
+    threshold_m = arrays.positive(threshold_m, "threshold_m", allow_zero=True)
     steps_Tm1x2 = np.linalg.norm(np.diff(toes[..., _FLOOR], axis=0), axis=-1)
     m = steps_Tm1x2.min(axis=1)
     return float(np.sum(m * (m > threshold_m)) / toes.shape[0])
-
-
-def contact_height_threshold(foot_heights_real_N, percentile: float = 10.0) -> float:
-    """Contact height (metres): the given percentile of real foot heights (y), pooled over
-    frames and feet (ravel a (T, K) array first), for `skate_ratio`."""
-    heights = _float_array(foot_heights_real_N, "foot_heights_real_N", 1)
-    p = float(percentile)
-    if not 0.0 <= p <= 100.0:
-        raise ValueError(f"percentile: must lie in [0, 100], got {percentile}")
-    return float(np.percentile(heights, p))
 
 
 def skate_ratio(toes_world_Tx2x3, fps: float, height_threshold_m: float,
@@ -306,12 +235,12 @@ def skate_ratio(toes_world_Tx2x3, fps: float, height_threshold_m: float,
     or nan when there are no contacts at all (0 would claim a perfect score for a motion that
     never touches the floor). Any number of feet K ≥ 1 is accepted (normally the two toes).
     """
-    toes = _float_array(toes_world_Tx2x3, "toes_world_Tx2x3", 3, shape=(None, None, 3), min_len=2)
-    fps = _positive(fps, "fps")
+    toes = arrays.float_array(toes_world_Tx2x3, "toes_world_Tx2x3", 3, shape=(None, None, 3), min_len=2)
+    fps = arrays.positive(fps, "fps")
     height_threshold_m = float(height_threshold_m)
     if not math.isfinite(height_threshold_m):
         raise ValueError(f"height_threshold_m: must be finite, got {height_threshold_m}")
-    speed_threshold_mps = _positive(speed_threshold_mps, "speed_threshold_mps", allow_zero=True)
+    speed_threshold_mps = arrays.positive(speed_threshold_mps, "speed_threshold_mps", allow_zero=True)
     low_TxK = toes[..., 1] < height_threshold_m
     contact_Tm1xK = low_TxK[:-1] & low_TxK[1:]
     speed_Tm1xK = np.linalg.norm(np.diff(toes[..., _FLOOR], axis=0), axis=-1) * fps
@@ -328,14 +257,14 @@ def skate_ratio(toes_world_Tx2x3, fps: float, height_threshold_m: float,
 def bone_length_error(joints_TxJx3, bone_pairs_Bx2, target_lengths_B) -> float:
     """Mean over frames and bones of |length − target| / target (dimensionless; 0.1 = 10 %).
     `bone_pairs_Bx2` holds (parent, child) joint indices; targets must be positive."""
-    joints = _float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3))
-    pairs = _int_array(bone_pairs_Bx2, "bone_pairs_Bx2", 2)
+    joints = arrays.float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3))
+    pairs = arrays.int_array(bone_pairs_Bx2, "bone_pairs_Bx2", 2)
     if pairs.shape[1] != 2:
         raise ValueError(f"bone_pairs_Bx2: axis 1 must have size 2, got shape {pairs.shape}")
     num_joints = joints.shape[1]
     if pairs.min() < 0 or pairs.max() >= num_joints:
         raise ValueError(f"bone_pairs_Bx2: joint indices must lie in [0, {num_joints})")
-    targets = _float_array(target_lengths_B, "target_lengths_B", 1, shape=(pairs.shape[0],))
+    targets = arrays.float_array(target_lengths_B, "target_lengths_B", 1, shape=(pairs.shape[0],))
     if np.any(targets <= 0):
         raise ValueError("target_lengths_B: lengths must be > 0")
     lengths_TxB = representation.joint_bone_lengths(joints, pairs)
@@ -351,7 +280,7 @@ def facing_error_deg(joints_TxJx3, left: int, right: int, forward_offset_rad: fl
     root's (joint 0) floor displacement from t − span to t + span. Frames travelling less than
     `min_travel_m` are skipped; nan if none is left. Real walking scores a few degrees (the
     pelvis sways); a body walking sideways scores ~90."""
-    joints = _float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3), min_len=2 * span + 1)
+    joints = arrays.float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3), min_len=2 * span + 1)
     across = joints[span:-span, left] - joints[span:-span, right]
     facing = np.arctan2(-across[:, 2], across[:, 0]) + forward_offset_rad
     travel = joints[2 * span:, 0] - joints[: -2 * span, 0]
@@ -365,8 +294,8 @@ def facing_error_deg(joints_TxJx3, left: int, right: int, forward_offset_rad: fl
 def ground_penetration(foot_heights_TxK, tolerance_m: float = 0.0) -> float:
     """Fraction of frames in which any of the K feet is below the floor by more than
     `tolerance_m` (height y < −tolerance)."""
-    heights = _float_array(foot_heights_TxK, "foot_heights_TxK", 2)
-    tolerance_m = _positive(tolerance_m, "tolerance_m", allow_zero=True)
+    heights = arrays.float_array(foot_heights_TxK, "foot_heights_TxK", 2)
+    tolerance_m = arrays.positive(tolerance_m, "tolerance_m", allow_zero=True)
     return float(np.mean(np.any(heights < -tolerance_m, axis=1)))
 
 
@@ -374,94 +303,10 @@ def mean_jerk(joints_TxJx3, fps: float) -> float:
     """Mean joint jerk magnitude in m/s³: ‖Δ³x‖·fps³ (the third finite difference along time
     scaled to a derivative) averaged over the T − 3 difference steps and all joints. Needs T ≥ 4.
     Normalising by real data (generated / real) is the caller's job."""
-    joints = _float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3), min_len=4)
-    fps = _positive(fps, "fps")
+    joints = arrays.float_array(joints_TxJx3, "joints_TxJx3", 3, shape=(None, None, 3), min_len=4)
+    fps = arrays.positive(fps, "fps")
     jerk_Tm3xJx3 = np.diff(joints, n=3, axis=0) * fps**3
     return float(np.mean(np.linalg.norm(jerk_Tm3xJx3, axis=-1)))
-
-
-# ---------------------------------------------------------------------------------------------
-# 8. Gait: does it walk? (toe tracks; heights above the clip's own floor)
-
-GAIT_FLOOR_PERCENTILE = 5.0  # the floor: this percentile of the lower toe's height over the clip
-STEP_BAND_HZ = (0.4, 4.0)  # gait cycles per second considered by step_frequency_hz
-
-
-def toe_heights(toes_world_Tx2x3, floor_percentile: float = GAIT_FLOOR_PERCENTILE) -> np.ndarray:
-    """Heights (T, K) of the K toes above the clip's floor, the `floor_percentile` of the lower
-    toe's height over the clip: robust to a few frames below it (noise, a stumble)."""
-    toes = _float_array(toes_world_Tx2x3, "toes_world_Tx2x3", 3, shape=(None, None, 3))
-    p = float(floor_percentile)
-    if not 0.0 <= p <= 100.0:
-        raise ValueError(f"floor_percentile: must lie in [0, 100], got {floor_percentile}")
-    y = toes[..., 1]
-    return y - np.percentile(y.min(axis=1), p)
-
-
-def support(heights_TxK, contact_height_m: float) -> float:
-    """Share of frames in which the lowest toe is within `contact_height_m` of the floor
-    (a walk always keeps a foot down; a hop or a float does not)."""
-    h = _float_array(heights_TxK, "heights_TxK", 2)
-    return float(np.mean(h.min(axis=1) < _positive(contact_height_m, "contact_height_m")))
-
-
-def lower_foot_height(heights_TxK) -> float:
-    """Mean height (metres) of the lower toe above the floor (real walks: millimetres)."""
-    return float(np.mean(_float_array(heights_TxK, "heights_TxK", 2).min(axis=1)))
-
-
-def alternation(heights_Tx2) -> float:
-    """−corr(left toe height, right toe height): positive when the feet lift in turn (a walk),
-    negative when they move together (a hop, a glide that bobs). nan if a foot never moves."""
-    h = _float_array(heights_Tx2, "heights_Tx2", 2, shape=(None, 2), min_len=3)
-    if np.ptp(h[:, 0]) == 0 or np.ptp(h[:, 1]) == 0:
-        return float("nan")
-    return float(-np.corrcoef(h[:, 0], h[:, 1])[0, 1])
-
-
-def step_frequency_hz(heights_Tx2, fps: float, band_hz: tuple[float, float] = STEP_BAND_HZ) -> float:
-    """Gait cycles per second (one left and one right step each): the dominant frequency of
-    left − right toe height, which rises and falls once per cycle. The difference is detrended,
-    Hann-windowed and zero-padded to 16x its length; the highest spectral peak within `band_hz`
-    is refined by a parabola through its log magnitudes. nan if the difference is constant or the
-    clip is shorter than one cycle of the band's lowest frequency."""
-    h = _float_array(heights_Tx2, "heights_Tx2", 2, shape=(None, 2), min_len=4)
-    fps = _positive(fps, "fps")
-    lo, hi = float(band_hz[0]), float(band_hz[1])
-    if not 0 < lo < hi:
-        raise ValueError(f"band_hz: need 0 < low < high, got {band_hz}")
-    n = h.shape[0]
-    if n / fps < 1.0 / lo:
-        return float("nan")
-    d = h[:, 0] - h[:, 1]
-    t = np.arange(n)
-    d = d - np.polyval(np.polyfit(t, d, 1), t)
-    if np.allclose(d, 0.0, atol=1e-9):
-        return float("nan")
-    nfft = 16 * n
-    mag = np.abs(np.fft.rfft(d * np.hanning(n), nfft))
-    freqs = np.fft.rfftfreq(nfft, 1.0 / fps)
-    idx = np.flatnonzero((freqs >= lo) & (freqs <= min(hi, fps / 2)))
-    if idx.size == 0:
-        return float("nan")
-    k = int(idx[np.argmax(mag[idx])])
-    if 0 < k < len(mag) - 1 and min(mag[k - 1], mag[k], mag[k + 1]) > 0:
-        a, b, c = np.log(mag[k - 1 : k + 2])
-        denom = a - 2 * b + c
-        k = k + (0.5 * (a - c) / denom if denom < 0 else 0.0)
-    return float(k * fps / nfft)
-
-
-def step_amplitude_m(heights_Tx2) -> float:
-    """Standard deviation (metres) of left − right toe height: how high the steps lift."""
-    h = _float_array(heights_Tx2, "heights_Tx2", 2, shape=(None, 2))
-    return float(np.std(h[:, 0] - h[:, 1]))
-
-
-def height_range_m(root_Tx3) -> float:
-    """Range (max − min, metres) of the root's height over a clip: a float or a drift shows as
-    a range far beyond a walk's bounce."""
-    return float(np.ptp(_float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3))[:, 1]))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -472,9 +317,9 @@ def interpolation_monotonicity(alphas_N, p_b_N) -> float:
     """Spearman rank correlation of the blend weight α with the evaluator's p(style B)
     (1 = p(B) rises monotonically along the interpolation). nan if either input is constant
     (the correlation is undefined)."""
-    alphas = _float_array(alphas_N, "alphas_N", 1, min_len=2)
-    p_b = _float_array(p_b_N, "p_b_N", 1, min_len=2)
-    _same_len(alphas, "alphas_N", p_b, "p_b_N")
+    alphas = arrays.float_array(alphas_N, "alphas_N", 1, min_len=2)
+    p_b = arrays.float_array(p_b_N, "p_b_N", 1, min_len=2)
+    arrays.same_len(alphas, "alphas_N", p_b, "p_b_N")
     # Checked here so scipy's ConstantInputWarning never fires.
     if np.all(p_b == p_b[0]) or np.all(alphas == alphas[0]):
         return float("nan")
@@ -484,8 +329,8 @@ def interpolation_monotonicity(alphas_N, p_b_N) -> float:
 def nearest_centroid(w_NxD, centroids_CxD) -> np.ndarray:
     """Index (int64, (N,)) of the nearest centroid (Euclidean) for each code; ties go to the
     lower index."""
-    w = _float_array(w_NxD, "w_NxD", 2)
-    centroids = _float_array(centroids_CxD, "centroids_CxD", 2, shape=(None, w.shape[1]))
+    w = arrays.float_array(w_NxD, "w_NxD", 2)
+    centroids = arrays.float_array(centroids_CxD, "centroids_CxD", 2, shape=(None, w.shape[1]))
     dist_NxC = np.linalg.norm(w[:, None, :] - centroids[None, :, :], axis=-1)
     return np.argmin(dist_NxC, axis=1).astype(np.int64)
 
@@ -494,7 +339,7 @@ def nearest_centroid_accuracy(w_NxD, labels_N, centroids_CxD) -> float:
     """Fraction of codes whose nearest centroid is their label (style-space separability, and
     style-search recovery when w are recovered codes)."""
     pred = nearest_centroid(w_NxD, centroids_CxD)
-    labels = _int_array(labels_N, "labels_N", 1)
+    labels = arrays.int_array(labels_N, "labels_N", 1)
     if labels.shape[0] != pred.shape[0]:
         raise ValueError(f"labels_N: length {labels.shape[0]} does not match w_NxD ({pred.shape[0]})")
     return float(np.mean(pred == labels))

@@ -23,7 +23,7 @@ from motiongan_jax.analysis import clips as clips_lib
 from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.analysis import style_space
 from motiongan_jax.config import ConfigError, config_hash
-from motiongan_jax.data import dataset as data
+from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
 from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics
 from motiongan_jax.evaluation.eval_curves import (
     EvalCurve,
@@ -35,8 +35,9 @@ from motiongan_jax.evaluation.eval_curves import (
     shape_curves,
 )
 from motiongan_jax.generate import styles, walk
+from motiongan_jax.model import apply as model_apply
 from motiongan_jax.motion.representation import foot_joints, from_rows
-from motiongan_jax.train import checkpoint, inference
+from motiongan_jax.train import checkpoint
 
 
 class EvaluationError(ValueError):
@@ -70,7 +71,7 @@ class Context:
     feet: tuple[int, int]
     curves_: list[EvalCurve]
     settings: Settings
-    contact_height_m: float  # calibrated on the real training clips (data.contact_height)
+    contact_height_m: float  # calibrated on the real training clips (gait_stats.contact_height)
     long_curve: EvalCurve | None = None  # tens of metres: does the walk drift?
     probe_batch: dict | None = None  # real training windows from the run's sampler, for discriminator_probe
 
@@ -118,7 +119,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
     s = ctx.settings
     C = len(ctx.style_names)
     T = ctx.cfg.data.window_T
-    Z = inference.generator_z_dim(ctx.state)
+    Z = model_apply.z_dim(ctx.state)
     labels = np.repeat(np.arange(C, dtype=np.int32), s.k)
     key = jax.random.key(seed)
     rows, win_logits, win_feats, win_labels, mm_groups = [], [], [], [], []
@@ -127,7 +128,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
         w = styles.latent_codes(ctx.state, labels, z)
         # each draw starts its walk at its own gait phase, as in training
         phase = (np.asarray(jax.random.uniform(jax.random.fold_in(key, 100_000 + ci), (C * s.k,), maxval=2 * np.pi))
-                 if inference.has_gait_phase(ctx.state) else None)
+                 if model_apply.has_gait_phase(ctx.state) else None)
         gen = walk.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, np.asarray(w), phase)
         root = gen.positions[:, :, 0]
         r, p, n = clip_metrics.cut_windows(root, gen.pose, T)
@@ -149,7 +150,7 @@ def _generate_block(ctx: Context, seed: int, contact: float) -> dict:
 def _long_curve_block(ctx: Context, seed: int) -> dict:
     """Every style (one noise draw) along the long curve: gait metrics, averaged over styles."""
     C = len(ctx.style_names)
-    z = jax.random.normal(jax.random.key(20_000 + seed), (C, inference.generator_z_dim(ctx.state)), jnp.float32)
+    z = jax.random.normal(jax.random.key(20_000 + seed), (C, model_apply.z_dim(ctx.state)), jnp.float32)
     w = styles.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z)
     gen = walk.generate_motion(ctx.state, ctx.layout, ctx.long_curve.curve_Lx3, np.asarray(w))
     rows = [clip_metrics.gait_metrics(gen.positions[b], ctx.feet, ctx.sample_rate, ctx.contact_height_m)
@@ -376,11 +377,11 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
         problems.append(f"window T {ev.meta.get('window_T')} vs {cfg.data.window_T}")
     if problems:
         raise evaluator.EvaluatorError(f"{ev_path} does not match the run {workdir}: " + "; ".join(problems))
-    dataset = data.load_dataset(cfg.data)
+    dataset = clip_cache.load_dataset(cfg.data)
     if tuple(dataset.style_names) != style_names:
-        raise data.DataError(f"the data's styles {list(dataset.style_names)} differ from the model's")
+        raise file_labels.DataError(f"the data's styles {list(dataset.style_names)} differ from the model's")
     if not dataset.val:
-        raise data.DataError("the validation split is empty: no held-out data to evaluate on")
+        raise file_labels.DataError("the validation split is empty: no held-out data to evaluate on")
     rate = walk.sample_rate(meta, cfg)
     T = cfg.data.window_T
     L = settings.windows_per_curve * T
@@ -394,11 +395,11 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
                                    cfg.data.control_point_interval / dataset.fps, log=log)
     eval_curves += shape_curves(rate, speed, L, T, shapes)
     feet = foot_joints(layout)
-    contact = data.contact_height(dataset.train, layout, feet)
+    contact = gait_stats.contact_height(dataset.train, layout, feet)
     log(f"contact height {contact * 100:.1f} cm (calibrated on the training clips)")
     long_curve = long_line(rate, speed, settings.long_curve_m)
-    probe = jax.jit(data.make_sample_batch(cfg.data, d_probe.PROBE_WINDOWS))(
-        data.build_arrays(dataset.train, dataset.style_names, cfg.data), jax.random.key(0), 0)
+    probe = jax.jit(sampling.make_sample_batch(cfg.data, d_probe.PROBE_WINDOWS))(
+        sampling.build_arrays(dataset.train, dataset.style_names, cfg.data), jax.random.key(0), 0)
     ctx = Context(state, meta, cfg, layout, ev, style_names, dataset.val, rate, feet,
                   eval_curves, settings, contact, long_curve, probe)
     results = evaluate(ctx, log=log)

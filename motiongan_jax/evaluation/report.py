@@ -142,25 +142,8 @@ def plot_confusion(conf_gen, conf_real, style_names, path) -> Path:
     return path
 
 
-def to_jsonable(x):
-    """Numpy values -> Python, non-finite floats -> None (strict JSON)."""
-    if isinstance(x, dict):
-        return {str(k): to_jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [to_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return to_jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
-
-
 def dumps(report: dict) -> str:
-    return json.dumps(to_jsonable(report), indent=1) + "\n"
+    return json.dumps(atomic.to_jsonable(report), indent=1, allow_nan=False) + "\n"
 
 
 def write_report(out, report: dict, ctx: Context) -> str:
@@ -172,7 +155,7 @@ def write_report(out, report: dict, ctx: Context) -> str:
     results = report["results"]
     out.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out / "report.json", dumps(report))
-    atomic.write_text(out / "report.md", markdown(to_jsonable(report)))
+    atomic.write_text(out / "report.md", markdown(atomic.to_jsonable(report)))
     plot_confusion(results["confusion_generated"], results["confusion_real"], ctx.style_names,
                    out / "confusion.png")
     codes = style_space.label_codes(ctx.state, ctx.style_names, k=10)

@@ -27,16 +27,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from motiongan_jax.generate.limits import GenerateError
-from motiongan_jax.train import inference
+from motiongan_jax.model import apply as model_apply
 
 FIGURES = ("styles", "interp", "arith")
 INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
-_latent_w = jax.jit(inference.latent_w)
+_latent_w = jax.jit(model_apply.style_codes)
 
 
 def latent_codes(state, labels_B, z_BxZ) -> jax.Array:
     """w = LT(label, z) for each row (B x w_dim; jitted on G's part of the state)."""
-    return _latent_w(inference.generator_state(state), jnp.asarray(labels_B, jnp.int32),
+    return _latent_w(model_apply.generator_state(state), jnp.asarray(labels_B, jnp.int32),
                      jnp.asarray(z_BxZ, jnp.float32))
 
 
@@ -213,13 +213,13 @@ def load_w_file(path: str, w_dim: int) -> np.ndarray:
 
 def w_dim(state) -> int:
     """The style code's size (model.w_dim), read off the Latent Transform's last layer."""
-    return int(jax.eval_shape(lambda s: inference.latent_w(s, jnp.zeros((1,), jnp.int32)), state).shape[-1])
+    return int(jax.eval_shape(lambda s: model_apply.style_codes(s, jnp.zeros((1,), jnp.int32)), state).shape[-1])
 
 
 def z_codes(state, z: str | int = "zero", seed: int = 0) -> np.ndarray:
     """(K, z_dim) noise codes: "zero" -> one zero z; "seed" -> one N(0, I) draw from the seed;
     an integer K (or its string) -> K draws from the seed."""
-    z_dim = inference.generator_z_dim(state)
+    z_dim = model_apply.z_dim(state)
     key = jax.random.fold_in(jax.random.key(seed), 2)
     if isinstance(z, str) and z.strip().lower() == "zero":
         return np.zeros((1, z_dim), np.float32)
@@ -240,7 +240,7 @@ def spec_codes(state, specs: Sequence[StyleSpec], style_names: Sequence[str],
     zero z). Every label's w is computed in one fixed batch (all labels x all z), so a style's
     w does not depend on the other specs; sums are taken in float64, so weights 1 and 0 give
     that style's w exactly."""
-    z_dim, D, C = inference.generator_z_dim(state), w_dim(state), len(style_names)
+    z_dim, D, C = model_apply.z_dim(state), w_dim(state), len(style_names)
     z = np.zeros((1, z_dim), np.float32) if z_KxZ is None else np.asarray(z_KxZ, np.float32)
     if z.ndim != 2 or z.shape[1] != z_dim:
         raise GenerateError(f"z must be (K, {z_dim}), got shape {z.shape}")

@@ -20,6 +20,7 @@ import numpy as np
 
 from motiongan_jax.data import curves
 from motiongan_jax.generate import limits, walk
+from motiongan_jax.motion import trajectory
 
 DEFAULT_SPEED_M_PER_S = 1.2
 SHAPE_POINTS_PER_M = 100  # built-in shapes are drawn at 1 cm before resampling (at most MAX_CURVE_POINTS)
@@ -127,4 +128,4 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
         note += f"; in overlapping chunks of {walk.CHUNK_T} samples"
     if log is not None:
         log(note)
-    return curves.on_floor(xz).astype(np.float32)
+    return trajectory.on_floor(xz).astype(np.float32)

@@ -11,14 +11,14 @@ what a chunk's zero padding reaches is not used),
 rises linearly over CHUNK_FADE samples, and the weights are normalised to sum 1. Each chunk's
 statistics are its own 4.5 minutes instead of the whole walk's: tests/test_generate.py
 bounds the difference to one pass on a curve that fits both ways. A G with a gait phase
-(model.gait_phase) walks on one clock: each chunk's phase offset is the phase walked by its
-first sample (offset + 2π s / λ(w)), so the phase is one pass's, not restarted per chunk; the
+(model.gait_phase) walks on one clock, G's own (model.apply.walked_phase): each chunk's phase
+offset is the phase walked by its first sample, so the phase is one pass's, not restarted per chunk; the
 root (a blended velocity, its height's difference with model.root_height) is integrated once
 over the whole curve, so neither path nor height jumps at a seam. The straight extension past
 the curve's end is walked after it and changes no sample's phase.
 
 Root height. G predicts the root velocity (y included) and root-relative joints, never an
-absolute height. The root is integrated from the curve's start (curves.integrate: p[0] = start,
+absolute height. The root is integrated from the curve's start (trajectory.integrate: p[0] = start,
 p[t] = p[t-1] + v[t]), then each clip is lifted as a whole so that the 5th percentile over frames
 of its lowest joint's height is 0: feet on the floor, robust to a few frames of dipping toes.
 (The reference hard-coded a start height per style name, DESIGN.md §6.)
@@ -29,14 +29,13 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable, Sequence
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax.data import curves
 from motiongan_jax.generate import limits
+from motiongan_jax.model import apply as model_apply
+from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import from_rows
-from motiongan_jax.train import inference
 
 MIN_T = 16
 # How: one G call holds at most CHUNK_T samples of one motion and BATCH_SAMPLES in all
@@ -46,21 +45,6 @@ CHUNK_FADE = 256
 CHUNK_OVERLAP = 2 * CHUNK_MARGIN + CHUNK_FADE
 BATCH_SAMPLES = 8_192
 FLOOR_PERCENTILE = 5.0
-# jitted once per shape: one XLA compile of G, faster than dispatching its ops one by one
-_apply_g = jax.jit(lambda state, vel, w, phase: inference.generator_apply(state, vel, w_BxD=w, phase_offset_B=phase))
-_stride_m = jax.jit(lambda state, w: jnp.exp(inference.generator(state).log_stride(w)))  # λ(w), metres
-
-
-def apply_code(state, curve_vel_BxTx3, w_BxD, phase_offset_B=None):
-    """(root_vel_BxTx3, pose_BxTxR) of G for style codes w: the one jitted G of generation,
-    analysis and evaluation (compiled once per shape, on G's part of the state; inputs go through
-    numpy so that arrays from any computation share one cache entry). `phase_offset_B`: a G with
-    a gait phase starts there (radians; None: 0)."""
-    phase = None if phase_offset_B is None else np.asarray(phase_offset_B, np.float32)
-    return _apply_g(inference.generator_state(state), np.asarray(curve_vel_BxTx3, np.float32),
-                    np.asarray(w_BxD, np.float32), phase)
-
-
 def padded_length(num_samples: int) -> int:
     """The T that G runs on for a curve of `num_samples`: the next multiple of 8, at least MIN_T."""
     return max(MIN_T, -(-int(num_samples) // 8) * 8)
@@ -112,7 +96,7 @@ def generate_motion(state, layout, curve_Mx3, w_BxD, phase_offset_B=None, *, chu
         raise limits.GenerateError(f"{B} motions x {M:,} samples = {B * M:,} are more than the limit of "
                                    f"{limits.MAX_TOTAL_SAMPLES:,} (generate.limits.MAX_TOTAL_SAMPLES): "
                                    f"ask for fewer styles or noise draws at once, or a shorter curve")
-    if inference.has_gait_phase(state):
+    if model_apply.has_gait_phase(state):
         phase = np.zeros(B) if phase_offset_B is None else np.asarray(phase_offset_B, np.float64)
         if phase.shape != (B,) or not np.isfinite(phase).all():
             raise limits.GenerateError(f"phase offsets must be {B} finite numbers (radians), one per motion, "
@@ -121,11 +105,11 @@ def generate_motion(state, layout, curve_Mx3, w_BxD, phase_offset_B=None, *, chu
         raise limits.GenerateError("a phase offset was given, but this model has no gait phase")
     else:
         phase = None
-    vel_Tx3 = curves.velocity(jnp.asarray(extend_straight(curve, padded_length(M) - M))[None])[0]
+    vel_Tx3 = trajectory.velocity(jnp.asarray(extend_straight(curve, padded_length(M) - M))[None])[0]
     root_vel, pose = _g_outputs(state, vel_Tx3, w, phase, chunk_T, progress)
     root_vel, pose = root_vel[:, :M], pose[:, :M]
     start = np.broadcast_to(curve[0].astype(np.float64) * np.array([1.0, 0.0, 1.0]), (B, 3))
-    # curves.integrate's convention (p[0] = start, p[t] = p[t-1] + v[t], v[0] unused), in float64
+    # trajectory.integrate's convention (p[0] = start, p[t] = p[t-1] + v[t], v[0] unused), in float64
     root = start[:, None, :] + np.concatenate([np.zeros((B, 1, 3)), np.cumsum(root_vel[:, 1:], axis=1)], 1)
     joints = np.asarray(from_rows(root, pose, layout), np.float64)
     if not np.isfinite(joints).all():
@@ -189,11 +173,10 @@ def _g_outputs(state, vel_Tx3, w_BxD: np.ndarray, phase_B: np.ndarray | None, ch
     weights = chunk_weights(starts, L)
     group = min(B, max(1, BATCH_SAMPLES // L))
     if phase_B is not None and len(starts) > 1:
-        # G's phase is a clock in walked distance from its first sample (nn.walker.walked_phase:
-        # the first velocity is not walked): a chunk starting at s starts at the phase walked by s
-        step_T = np.linalg.norm(np.asarray(vel_Tx3, np.float64)[:, ::2], axis=-1)
-        walked_T = np.cumsum(np.concatenate([[0.0], step_T[1:]]))
-        stride_B = np.asarray(_stride_m(inference.generator_state(state), jnp.asarray(w_BxD)), np.float64)
+        # one clock for the whole curve, G's own (model.apply.walked_phase): each chunk starts at
+        # the phase its first sample is walked at, so the phase is one pass's, not restarted per chunk
+        phase_BxT = np.mod(model_apply.walked_phase(state, np.broadcast_to(np.asarray(vel_Tx3), (B, T, 3)), w_BxD,
+                                                    phase_B), 2 * np.pi)
     total, done = -(-B // group) * len(starts), 0
     root = pose = None
     norm_T = np.zeros(T)
@@ -206,10 +189,8 @@ def _g_outputs(state, vel_Tx3, w_BxD: np.ndarray, phase_B: np.ndarray | None, ch
         for s, wt in zip(starts, weights):
             phase = None
             if phase_B is not None:
-                phase = phase_B[idx] if s == 0 else np.mod(phase_B[idx] + 2 * np.pi * walked_T[s] / stride_B[idx],
-                                                            2 * np.pi)
-                phase = jnp.asarray(phase, jnp.float32)
-            r, p = apply_code(state, jnp.broadcast_to(vel_Tx3[s:s + L], (group, L, 3)), wg, phase)
+                phase = phase_B[idx] if s == 0 else phase_BxT[idx, s]
+            r, p = model_apply.apply_code(state, jnp.broadcast_to(vel_Tx3[s:s + L], (group, L, 3)), wg, phase)
             r = np.asarray(r, np.float64)[:keep]
             p = np.asarray(p, np.float64)[:keep]
             if root is None:

@@ -160,8 +160,15 @@ class Generator(nnx.Module):
         """(scale, bias) of every AdaIN layer for a style code, keyed by block name."""
         return {name: getattr(self, name).adain.style(w_BxD) for name in self.BLOCKS}
 
-    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """(root_vel_BxTx3, pose_BxTxR), metres: the curve velocity's three rows are the input."""
+    # the paper's G keeps no gait clock; the walker (nn/walker.py) does when its option is on
+    has_gait_phase = False
+
+    def __call__(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array, phase_offset_B: jax.Array | None = None,
+                 phase_BxT: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:
+        """(root_vel_BxTx3, pose_BxTxR), metres: the curve velocity's three rows are the input. The
+        phase arguments are the walker's call (one signature for every G); the paper's G takes none."""
+        if phase_offset_B is not None or phase_BxT is not None:
+            raise ValueError("a phase given, but this G has no gait phase (model.gait_phase)")
         return self.network((curve_vel_BxTx3 / self.length_unit)[..., None], w_BxD)
 
     def network(self, x_BxTx3xC: jax.Array, w_BxD: jax.Array,

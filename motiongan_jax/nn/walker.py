@@ -11,7 +11,7 @@ root height, output prior, exact bones and the curve frame on the way out. docs/
   pose gliding along the curve instead of a collapsed body standing still.
 * Curve frame (model.g_frame = "curve"): G works in the walker's frame. Its input is each curve
   velocity seen from the previous one's heading, u[t] = R(-θ[t-1]) v[t]; its outputs are turned
-  by the curve's smoothed heading (`curves.smooth_heading`) before the world curve velocity is
+  by the curve's smoothed heading (`trajectory.smooth_heading`) before the world curve velocity is
   added. Rotating the curve rotates the motion exactly, so G need not learn every direction
   the rotation augmentation draws.
 * Exact bones (model.exact_bones): the pose head's bones keep their directions and take the
@@ -37,7 +37,7 @@ import jax.numpy as jnp
 from flax import nnx
 
 from motiongan_jax.config import GFrame, choices
-from motiongan_jax.data import curves
+from motiongan_jax.motion import trajectory
 from motiongan_jax.nn.generator import Generator
 from motiongan_jax.nn.layers import Dense, zeros_init
 
@@ -65,7 +65,7 @@ PHASE_CHANNELS = 2 * PHASE_HARMONICS
 def walked_phase(curve_vel_BxTx3: jax.Array, stride_B: jax.Array, offset_B: jax.Array) -> jax.Array:
     """B x T gait phase (radians) φ[t] = φ0 + 2π s[t] / λ, where s[t] is the horizontal distance
     walked up to sample t (the sum of |v[1..t]|, metres; v[0] duplicates v[1] and is not walked, as
-    in curves.integrate), λ = `stride_B` metres and φ0 = `offset_B` radians."""
+    in trajectory.integrate), λ = `stride_B` metres and φ0 = `offset_B` radians."""
     b = curve_vel_BxTx3.shape[0]
     chex.assert_shape((stride_B, offset_B), (b,))
     step_BxT = jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1).at[:, 0].set(0.0)
@@ -109,6 +109,10 @@ class WalkerGenerator(Generator):
         self.stride_head = (Dense(self.w_dim, 1, kernel_init=zeros_init, bias_init=zeros_init, rngs=rngs)
                             if self.gait_phase else None)
 
+    @property
+    def has_gait_phase(self) -> bool:
+        return self.gait_phase
+
     def log_stride(self, w_BxD: jax.Array) -> jax.Array:
         """log of the stride length λ(w) in metres (B), for a G with a gait phase."""
         if self.stride_head is None:
@@ -134,8 +138,8 @@ class WalkerGenerator(Generator):
         b, t = curve_vel_BxTx3.shape[:2]
         vel_in = curve_vel_BxTx3
         if self.frame == "curve":
-            theta_BxT = curves.heading(curve_vel_BxTx3)
-            vel_in = curves.rotate_y(curve_vel_BxTx3, -jnp.concatenate([theta_BxT[:, :1], theta_BxT[:, :-1]], 1))
+            theta_BxT = trajectory.heading(curve_vel_BxTx3)
+            vel_in = trajectory.rotate_y(curve_vel_BxTx3, -jnp.concatenate([theta_BxT[:, :1], theta_BxT[:, :-1]], 1))
         x = (vel_in / self.length_unit)[..., None]  # B x T x 3 x 1
         phase_BxTx1xP = None
         if self.gait_phase:
@@ -157,9 +161,9 @@ class WalkerGenerator(Generator):
         if self.bones is not None:
             pose_BxTxR = project_bones(pose_BxTxR, self.bones)
         if self.frame == "curve":
-            out_BxT = curves.smooth_heading(curve_vel_BxTx3)
-            root_vel_BxTx3 = curves.rotate_y(root_vel_BxTx3, out_BxT)
-            pose_BxTxR = curves.rotate_rows_y(pose_BxTxR, out_BxT)
+            out_BxT = trajectory.smooth_heading(curve_vel_BxTx3)
+            root_vel_BxTx3 = trajectory.rotate_y(root_vel_BxTx3, out_BxT)
+            pose_BxTxR = trajectory.rotate_rows_y(pose_BxTxR, out_BxT)
         if self.residual_root:
             root_vel_BxTx3 = root_vel_BxTx3 + curve_vel_BxTx3
         return root_vel_BxTx3, pose_BxTxR

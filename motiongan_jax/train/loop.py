@@ -21,14 +21,12 @@ import time
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from motiongan_jax import atomic
 from motiongan_jax.config import Config, config_hash, to_dict
-from motiongan_jax.data import curves
-from motiongan_jax.data import dataset as data
-from motiongan_jax.train import checkpoint, health, inference, parallel
+from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
+from motiongan_jax.train import checkpoint, health, objectives, parallel
 from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
@@ -41,7 +39,7 @@ class NonFiniteError(FloatingPointError):
 # set-up
 # ----------------------------------------------------------------------------------------------
 
-def run_meta(cfg: Config, dataset: data.Dataset) -> dict:
+def run_meta(cfg: Config, dataset: clip_cache.Dataset) -> dict:
     """What a checkpoint must carry to be used without the data (and checked on resume)."""
     return {
         "config": to_dict(cfg),
@@ -107,30 +105,6 @@ def _hms(seconds: float) -> str:
 
 
 # ----------------------------------------------------------------------------------------------
-# preview
-# ----------------------------------------------------------------------------------------------
-
-def preview_curve(T: int, spacing_m: float) -> np.ndarray:
-    """The fixed preview curve: an S-curve with the training data's mean spacing per sample."""
-    pts = curves.shape_curve("s_curve", length=spacing_m * (T - 1), num_points=200)
-    xz = curves.resample_polyline(pts, num_points=T)
-    return curves.on_floor(xz).astype(np.float32)
-
-
-def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray, num: int = 3) -> Path:
-    """A few styles (z = 0) walking the fixed preview curve, as a GIF: generate.py's own path
-    (with G's moving average when the run keeps one)."""
-    from motiongan_jax import viz
-    from motiongan_jax.generate import walk
-
-    state = train_state.inference_state(state)
-    labels = np.linspace(0, len(style_names) - 1, min(num, len(style_names))).round().astype(np.int32)
-    gen = walk.generate_motion(state, layout, curve_Tx3, inference.latent_w(state, jnp.asarray(labels)))
-    return viz.animate_motions(list(gen.positions), layout.parents, [style_names[i] for i in labels], path,
-                               curves=[curve_Tx3] * len(labels), joint_names=layout.joint_names)
-
-
-# ----------------------------------------------------------------------------------------------
 # the loop
 # ----------------------------------------------------------------------------------------------
 
@@ -139,32 +113,34 @@ def make_step_fn(cfg: Config, dataset, log=print):
     training clips when the config's gait terms need them."""
     gait = None
     if step_lib.needs_gait_targets(cfg.train):
-        gait = data.gait_targets(dataset.train, dataset.style_names, dataset.layout)
+        gait = gait_stats.gait_targets(dataset.train, dataset.style_names, dataset.layout)
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
             + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))
     return step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
 
 
-def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print) -> dict:
+def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print, preview=None) -> dict:
     """Train (or resume) in `workdir`; returns the last logged metrics. In a multi-process run
-    every process calls this; only process 0 logs and writes files (module doc)."""
+    every process calls this; only process 0 logs and writes files (module doc). `preview(cfg,
+    dataset)` (e.g. generate.preview.previewer) returns `write(path, state)`, called every
+    train.preview_every steps with the path of that step's GIF: training itself never generates."""
     workdir = Path(workdir)
     primary = parallel.is_primary()
     if not primary:
         log, progress = (lambda *a, **k: None), False
     if primary:  # the others read the cache it fills
         workdir.mkdir(parents=True, exist_ok=True)
-        dataset = data.load_dataset(cfg.data, log=log)
+        dataset = clip_cache.load_dataset(cfg.data, log=log)
     parallel.sync("dataset")
     if not primary:
-        dataset = data.load_dataset(cfg.data, log=log)
+        dataset = clip_cache.load_dataset(cfg.data, log=log)
     meta = run_meta(cfg, dataset)
     if primary:
-        data.write_file_lists(workdir, [(c.source, c.label) for c in dataset.train],
+        file_labels.write_file_lists(workdir, [(c.source, c.label) for c in dataset.train],
                               [(c.source, c.label) for c in dataset.val])
-        atomic.write_text(workdir / "config.json", json.dumps(meta, indent=1) + "\n")
+        atomic.write_json(workdir / "config.json", meta)
 
-    arrays = data.build_arrays(dataset.train, dataset.style_names, cfg.data)
+    arrays = sampling.build_arrays(dataset.train, dataset.style_names, cfg.data)
     k_init, k_data, k_step = keys(cfg.train.seed)
     state = train_state.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
     step_fn = make_step_fn(cfg, dataset, log)
@@ -173,7 +149,8 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
         return step_fn(state, batch, jax.random.fold_in(key, s))
 
     # every process draws the whole batch on its first local device (parallel.py's module doc)
-    sample_batch = jax.jit(data.make_sample_batch(cfg.data, cfg.train.batch_size))
+    sample_batch = jax.jit(sampling.make_sample_batch(cfg.data, cfg.train.batch_size,
+                                                          objectives.reconstructed_rows(cfg.train)))
     parallel_run = jax.device_count() > 1
     if parallel_run:  # data parallel: batch split over the devices of every process, state replicated
         mesh = parallel.data_mesh()
@@ -200,10 +177,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
         log(f"nothing to do: checkpoint step {start} >= train.num_steps {total}")
         return {}
 
-    # the training data's mean distance per sample, measured within clips
-    spacing = float(np.mean([np.linalg.norm(np.diff(c.root_Fx3[:, [0, 2]], axis=0), axis=-1).mean()
-                             for c in dataset.train])) * cfg.data.frame_step
-    preview = preview_curve(cfg.data.window_T, spacing)
+    write_preview = preview(cfg, dataset) if preview is not None and primary and cfg.train.preview_every else None
     bar = Progress(total, start, progress)
     last: dict = {}
     pending = None  # (step, metrics) of the previous step, checked one step late to keep dispatch async
@@ -223,9 +197,8 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print)
             checkpoint.save(mngr, done, state, meta)  # every process: orbax writes it together
             if primary and not warned:
                 warned = _warn_if_upset(workdir, cfg, mngr.all_steps(), log)
-        if primary and cfg.train.preview_every and done % cfg.train.preview_every == 0:
-            write_preview(workdir / "previews" / f"step_{done:07d}.gif", parallel.local_copy(state),
-                          dataset.layout, dataset.style_names, preview)
+        if write_preview is not None and done % cfg.train.preview_every == 0:
+            write_preview(workdir / "previews" / f"step_{done:07d}.gif", parallel.local_copy(state))
     if pending is not None:
         last = _check_and_log(pending, workdir, cfg, bar, primary, force=True)
     return last

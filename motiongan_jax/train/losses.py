@@ -22,8 +22,7 @@ import numpy as np
 import optax
 
 from motiongan_jax.config import GanLoss, choices
-from motiongan_jax.data import curves
-from motiongan_jax.motion import representation
+from motiongan_jax.motion import representation, trajectory
 
 REAL_TARGET = 0.9  # label smoothing of the reference
 FAKE_TARGET = 0.1
@@ -85,7 +84,7 @@ def curve_loss(root_vel_BxTx3: jax.Array, curve_BxTx3: jax.Array, points: int = 
 
     With s = T / points, x̂_k = c[0] + Σ_{τ=1}^{k·s−1} v̂[τ] is compared with c[k·s−1] for
     k = 1..points: 0.5 (MSE_x + MSE_z) per point (mean over the batch), summed over points.
-    Convention (DESIGN.md §2.5): v[0] is ignored, as in `curves.integrate` and everywhere else in
+    Convention (DESIGN.md §2.5): v[0] is ignored, as in `trajectory.integrate` and everywhere else in
     this package; the reference's sum also includes v̂[0] (whose input counterpart is a duplicate).
     Lengths are divided by `unit`.
     """
@@ -94,7 +93,7 @@ def curve_loss(root_vel_BxTx3: jax.Array, curve_BxTx3: jax.Array, points: int = 
         raise ValueError(f"curve_points={points} must divide T={t}")
     s = t // points
     idx = np.arange(1, points + 1) * s - 1
-    pos = curves.integrate(curve_BxTx3[:, 0], root_vel_BxTx3)[:, idx]
+    pos = trajectory.integrate(curve_BxTx3[:, 0], root_vel_BxTx3)[:, idx]
     diff = (pos - curve_BxTx3[:, idx]) / unit  # B x points x 3
     mse_xz = jnp.mean(jnp.square(diff[..., (0, 2)]), axis=0)  # points x 2
     return jnp.sum(0.5 * jnp.sum(mse_xz, axis=-1))
@@ -114,9 +113,9 @@ CONTACT_SOFTNESS_M = 0.01
 
 def world_joints(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array) -> jax.Array:
     """World joint positions B x T x J x 3 (kept-joint order, root first) up to one constant per
-    window: the root integrated from the origin (curves.integrate) plus each joint's root-relative row."""
+    window: the root integrated from the origin (trajectory.integrate) plus each joint's root-relative row."""
     b, t, r = pose_BxTxR.shape
-    root_BxTx3 = curves.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), root_vel_BxTx3)
+    root_BxTx3 = trajectory.integrate(jnp.zeros((b, 3), root_vel_BxTx3.dtype), root_vel_BxTx3)
     rows_BxTxJx3 = jnp.concatenate([jnp.zeros((b, t, 1, 3), pose_BxTxR.dtype), pose_BxTxR.reshape(b, t, r // 3, 3)],
                                    axis=2)
     return root_BxTx3[:, :, None, :] + rows_BxTxJx3

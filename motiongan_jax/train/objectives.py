@@ -1,5 +1,6 @@
-"""D's and G's objectives as functions of a merged D, and the step's draws of fake labels, z and
-gait phase.
+"""D's and G's objectives as functions of a merged D (G's loss in one place: every term and the total
+from one weights table), and what the step gives G: fake labels, z and gait phase, with the
+reconstructed rows of the batch.
 """
 
 from __future__ import annotations
@@ -7,6 +8,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from motiongan_jax.motion import trajectory
 from motiongan_jax.nn import Discriminator
 from motiongan_jax.train import losses
 
@@ -36,38 +38,74 @@ def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, 
     }
 
 
-def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, curve_BxTx3,
-             bone_pairs, bone_lengths_m, train_cfg, length_unit: float, *, log_stride_B=None,
-             gait=None, real_vel_BxTx3=None, real_pose_BxTxR=None) -> dict[str, jax.Array]:
-    """G's loss terms (one D call). Curve, bone and foot losses are in units of length_unit.
-    The gait terms (train.w_g_stride, w_g_floor, w_g_skate) need `gait`, the stride term also
-    G's `log_stride_B`, the root jerk term (train.w_g_root_jerk) the real batch's root velocity,
-    the joint jerk term (train.w_g_joint_jerk) its root velocity and pose."""
-    t = train_cfg
+# G's loss terms and their weights: train.w_g_<name>. The first four are the paper's, always
+# computed; the others only when their weight is not 0. The total adds them in this order.
+G_TERMS = ("adv", "cls", "curve", "bone", "floor", "skate", "root_jerk", "joint_jerk", "stride", "rec")
+PAPER_G_TERMS = G_TERMS[:4]
+
+
+def g_weights(train_cfg) -> dict[str, float]:
+    """The weight of every term of G's loss (G_TERMS), from the config."""
+    return {name: float(getattr(train_cfg, f"w_g_{name}")) for name in G_TERMS}
+
+
+def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, batch: dict, train_cfg,
+             length_unit: float, *, bone_pairs, bone_lengths_m, gait=None, log_stride_B=None) -> dict[str, jax.Array]:
+    """Every active term of G's loss (one D call), `g_<name>` unweighted, and `g_total`, their sum
+    weighted by `g_weights`. Curve, bone, foot, jerk and reconstruction terms are in units of
+    length_unit. The real batch gives the curve, the jerk terms' bounds and the reconstruction's
+    targets (the rows `batch["rec_B"]` marks, at the samples `phase_valid_BxT` marks). The gait
+    terms need `gait` (data.GaitTargets), the stride term also G's `log_stride_B`."""
+    weights = g_weights(train_cfg)
+    active = [n for n in G_TERMS if n in PAPER_G_TERMS or weights[n]]
+    real_vel_BxTx3 = trajectory.velocity(batch["root_BxTx3"])
+    real_pose_BxTxR = batch["pose_BxTxR"]
     adv_f, cls_f = d(fake_vel_BxTx3, fake_pose_BxTxR, update_stats=True, labels_B=fake_labels_B)
-    adv = losses.adversarial_loss(adv_f, losses.REAL_TARGET, t.gan_loss)
-    cls = losses.class_loss(cls_f, fake_labels_B, t.gan_loss)
-    curve = losses.curve_loss(fake_vel_BxTx3, curve_BxTx3, t.curve_points, length_unit)
-    bone = losses.bone_loss(fake_pose_BxTxR, bone_pairs, bone_lengths_m, length_unit)
-    terms = {"g_adv": adv, "g_cls": cls, "g_curve": curve, "g_bone": bone}
-    total = t.w_g_adv * adv + t.w_g_cls * cls + t.w_g_curve * curve + t.w_g_bone * bone
-    if t.w_g_floor or t.w_g_skate:
+    terms = {"adv": losses.adversarial_loss(adv_f, losses.REAL_TARGET, train_cfg.gan_loss),
+             "cls": losses.class_loss(cls_f, fake_labels_B, train_cfg.gan_loss),
+             "curve": losses.curve_loss(fake_vel_BxTx3, batch["curve_BxTx3"], train_cfg.curve_points, length_unit),
+             "bone": losses.bone_loss(fake_pose_BxTxR, bone_pairs, bone_lengths_m, length_unit)}
+    if "floor" in active or "skate" in active:
         feet = losses.foot_losses(fake_vel_BxTx3, fake_pose_BxTxR, gait.toe_joints, gait.contact_height_m,
                                   length_unit)
-        terms.update(g_floor=feet["floor"], g_skate=feet["skate"])
-        total = total + t.w_g_floor * feet["floor"] + t.w_g_skate * feet["skate"]
-    if t.w_g_root_jerk:
-        terms["g_root_jerk"] = losses.root_jerk_excess(fake_vel_BxTx3, real_vel_BxTx3, length_unit)
-        total = total + t.w_g_root_jerk * terms["g_root_jerk"]
-    if t.w_g_joint_jerk:
-        terms["g_joint_jerk"] = losses.joint_jerk_excess(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3,
-                                                         real_pose_BxTxR, length_unit)
-        total = total + t.w_g_joint_jerk * terms["g_joint_jerk"]
-    if t.w_g_stride:
-        terms["g_stride"] = losses.stride_loss(log_stride_B, fake_labels_B, gait.stride_m_C)
-        total = total + t.w_g_stride * terms["g_stride"]
-    return {**terms, "g_total": total,
+        terms.update(floor=feet["floor"], skate=feet["skate"])
+    if "root_jerk" in active:
+        terms["root_jerk"] = losses.root_jerk_excess(fake_vel_BxTx3, real_vel_BxTx3, length_unit)
+    if "joint_jerk" in active:
+        terms["joint_jerk"] = losses.joint_jerk_excess(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3,
+                                                       real_pose_BxTxR, length_unit)
+    if "stride" in active:
+        terms["stride"] = losses.stride_loss(log_stride_B, fake_labels_B, gait.stride_m_C)
+    if "rec" in active:
+        valid_BxT = batch["phase_valid_BxT"] & batch["rec_B"][:, None]
+        terms["rec"] = losses.reconstruction_loss(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR,
+                                                  valid_BxT, length_unit)
+    total = None
+    for name in active:
+        total = weights[name] * terms[name] if total is None else total + weights[name] * terms[name]
+    return {**{f"g_{n}": terms[n] for n in active}, "g_total": total,
             "g_cls_acc_fake": jnp.mean((jnp.argmax(cls_f, -1) == fake_labels_B).astype(jnp.float32))}
+
+
+def reconstructed_rows(train_cfg) -> int:
+    """How many rows of each batch G reconstructs (the first half under train.w_g_rec, else none):
+    the batch's `rec_B` marks them (data.sampling.make_sample_batch)."""
+    return train_cfg.batch_size // 2 if train_cfg.w_g_rec else 0
+
+
+def generator_inputs(cfg, num_styles: int, batch: dict, key) -> tuple[jax.Array, jax.Array, jax.Array | None]:
+    """(labels_B, z_BxZ, phase_offset_B) the step gives G: labels, z and gait-phase offsets drawn
+    from `key`; the rows `batch["rec_B"]` marks take their window's own style (and z = 0 under
+    train.rec_z = "zero"), so that G reconstructs them (at their measured phase: the step)."""
+    b = batch["curve_BxTx3"].shape[0]
+    labels, z = sample_labels_and_z(cfg, num_styles, b, key)
+    phase = sample_phase(cfg, b, key)
+    if cfg.train.w_g_rec:
+        rec_B = batch["rec_B"]
+        labels = jnp.where(rec_B, batch["label_B"], labels)
+        if cfg.train.rec_z == "zero":
+            z = jnp.where(rec_B[:, None], 0.0, z)
+    return labels, z, phase
 
 
 def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Array, jax.Array]:

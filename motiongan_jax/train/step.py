@@ -15,7 +15,7 @@ with the state inside, so the caller can `jax.jit(..., donate_argnums=0)` it.
 D runs three times (fake for D, real for D, fake for G, in that order) with `update_stats=True`,
 so its spectral-norm vectors advance three power iterations per step, as in the reference.
 No PRNG key lives in the state: the caller passes `fold_in(base_key, step)`.
-Velocities (G's input and the real root velocity) come from `data.curves.velocity`.
+Velocities (G's input and the real root velocity) come from `motion.trajectory.velocity`.
 """
 
 from __future__ import annotations
@@ -29,24 +29,26 @@ import optax
 from flax import nnx
 
 from motiongan_jax.config import GanLoss, choices
-from motiongan_jax.data import curves
+from motiongan_jax.model.build import count_rel_joints
+from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.nn import SpectralNormState
-from motiongan_jax.train import losses
-from motiongan_jax.train.objectives import (
-    d_losses,
-    g_losses,
-    sample_labels_and_z,
-    sample_phase,
-)
-from motiongan_jax.train.state import TrainState, count_rel_joints, optimizers
+from motiongan_jax.train.objectives import d_losses, g_losses, generator_inputs
+from motiongan_jax.train.state import TrainState, optimizers
 
 
-def check_batch(batch: dict, num_rows: int) -> None:
-    """Shapes must agree (B x T x 3, B x T x R, B); checked at trace time, costs nothing after."""
+def check_batch(batch: dict, num_rows: int, rec: bool = False) -> None:
+    """Shapes must agree (B x T x 3, B x T x R, B); checked at trace time, costs nothing after.
+    `rec`: the batch must mark its reconstructed rows (`rec_B`) and carry their phase."""
     b, t, _ = batch["curve_BxTx3"].shape
     want = {"root_BxTx3": (b, t, 3), "pose_BxTxR": (b, t, num_rows), "curve_BxTx3": (b, t, 3), "label_B": (b,)}
-    want.update({k: (b, t) for k in ("phase_BxT", "phase_valid_BxT") if k in batch})
+    want.update({k: (b, t) for k in ("phase_BxT", "phase_valid_BxT") if k in batch or rec})
+    if "rec_B" in batch or rec:
+        want["rec_B"] = (b,)
+    missing = sorted(k for k in want if k not in batch)
+    if missing:
+        raise ValueError(f"the batch lacks {', '.join(missing)} (train.w_g_rec needs the reconstructed rows marked: "
+                         "data.sampling.make_sample_batch with rec_rows)")
     bad = {k: batch[k].shape for k, shape in want.items() if batch[k].shape != shape}
     if bad:
         raise ValueError(f"batch shapes disagree: {bad}; expected {want}")
@@ -66,7 +68,6 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     `gait` (data.GaitTargets, from the real training clips) is needed by the gait loss terms.
     """
     tcfg = cfg.train
-    rec_half = tcfg.batch_size // 2 if tcfg.w_g_rec else 0
     if needs_gait_targets(tcfg) and gait is None:
         raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate) need gait targets")
     if gait is not None and len(gait.stride_m_C) != num_styles:
@@ -84,28 +85,22 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     num_rows = int(layout.num_rows)
 
     def train_step(state: TrainState, batch: dict, key: jax.Array) -> tuple[TrainState, dict]:
-        check_batch(batch, num_rows)
-        curve = batch["curve_BxTx3"]
-        fake_labels, z = sample_labels_and_z(cfg, num_styles, curve.shape[0], key)
-        phase = sample_phase(cfg, curve.shape[0], key)
-        curve_vel = curves.velocity(curve)
-        real_vel = curves.velocity(batch["root_BxTx3"])
+        check_batch(batch, num_rows, rec=bool(tcfg.w_g_rec))
+        fake_labels, z, phase = generator_inputs(cfg, num_styles, batch, key)
+        curve_vel = trajectory.velocity(batch["curve_BxTx3"])
+        real_vel = trajectory.velocity(batch["root_BxTx3"])
         real_pose = batch["pose_BxTxR"]
-        if rec_half:  # the first half: each window's own style and measured phase, z = 0 or as drawn
-            rec_B = jnp.arange(curve.shape[0]) < rec_half
-            fake_labels = jnp.where(rec_B, batch["label_B"], fake_labels)
-            if tcfg.rec_z == "zero":
-                z = jnp.where(rec_B[:, None], 0.0, z)
 
-        # The single G forward; its VJP carries G's loss gradient back after the D update.
+        # The single G forward; its VJP carries G's loss gradient back after the D update. The
+        # reconstructed rows walk their window's measured phase, the others G's own clock.
         def g_forward(g_params):
             g = nnx.merge(state.g_def, g_params, copy=True)
             w = g.style(fake_labels, z)
             phase_BxT = None
-            if rec_half:
-                phase_BxT = jnp.where(rec_B[:, None], batch["phase_BxT"], g.walked_phase(curve_vel, w, phase))
-            root_vel, pose = g(curve_vel, w, phase, phase_BxT) if cfg.model.gait_phase else g(curve_vel, w)
-            return root_vel, pose, (g.log_stride(w) if cfg.model.gait_phase else None)
+            if tcfg.w_g_rec:
+                phase_BxT = jnp.where(batch["rec_B"][:, None], batch["phase_BxT"], g.walked_phase(curve_vel, w, phase))
+            root_vel, pose = g(curve_vel, w, phase, phase_BxT)
+            return root_vel, pose, (g.log_stride(w) if g.has_gait_phase else None)
 
         fake, g_vjp = jax.vjp(g_forward, state.g_params)
 
@@ -122,15 +117,8 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         # --- G update through the updated D --------------------------------------------------
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
-            terms = g_losses(d, *fake_out[:2], fake_labels, curve, bone_pairs, bone_lengths, tcfg,
-                             LENGTH_UNIT_M, log_stride_B=fake_out[2], gait=gait, real_vel_BxTx3=real_vel,
-                             real_pose_BxTxR=real_pose)
-            if rec_half:
-                h = rec_half
-                terms["g_rec"] = losses.reconstruction_loss(fake_out[0][:h], fake_out[1][:h], real_vel[:h],
-                                                            real_pose[:h], batch["phase_valid_BxT"][:h],
-                                                            LENGTH_UNIT_M)
-                terms["g_total"] = terms["g_total"] + tcfg.w_g_rec * terms["g_rec"]
+            terms = g_losses(d, *fake_out[:2], fake_labels, batch, tcfg, LENGTH_UNIT_M, bone_pairs=bone_pairs,
+                             bone_lengths_m=bone_lengths, gait=gait, log_stride_B=fake_out[2])
             return terms["g_total"], (terms, nnx.state(d, SpectralNormState))
 
         (_, (g_terms, sn)), fake_grads = jax.value_and_grad(g_objective, has_aux=True)(fake)

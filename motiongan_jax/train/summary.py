@@ -15,30 +15,29 @@ import jax
 from flax import nnx
 
 from motiongan_jax.config import Config
-from motiongan_jax.data import dataset as data
-from motiongan_jax.data import synthetic
+from motiongan_jax.data import clip_cache, file_labels, synthetic
+from motiongan_jax.model import build as model_build
 from motiongan_jax.motion.representation import layout_from_skeleton
 from motiongan_jax.nn import count_params
-from motiongan_jax.train import state as train_state
 
 
 def model_source(cfg: Config):
     """(layout, style names, a line saying where they came from) for the dry run."""
     d = cfg.data
     if d.data_dir is not None or d.label_rule == "synthetic":
-        dataset = data.load_dataset(d)
+        dataset = clip_cache.load_dataset(d)
         return dataset.layout, dataset.style_names, (
             f"data {dataset.data_dir} ({len(dataset.train)} train / {len(dataset.val)} val clips, "
             f"{dataset.num_styles} styles, {dataset.fps:g} fps)")
     if d.label_rule not in ("cmu", "paper"):
-        raise data.DataError(f"--dry-run without data: label rule {d.label_rule!r} takes its skeleton and "
+        raise file_labels.DataError(f"--dry-run without data: label rule {d.label_rule!r} takes its skeleton and "
                              f"styles from the files; pass --data DIR")
     if d.styles:
         styles, where = tuple(d.styles), "data.styles"
     elif d.label_rule == "cmu":
-        styles, where = tuple(sorted(set(data.CMU_TRIAL_STYLES.values()))), "the CMU trial table (data.py)"
+        styles, where = tuple(sorted(set(file_labels.CMU_TRIAL_STYLES.values()))), "the CMU trial table (data.py)"
     else:
-        raise data.DataError("--dry-run without data: label rule 'paper' takes its styles from the file "
+        raise file_labels.DataError("--dry-run without data: label rule 'paper' takes its styles from the file "
                              "names; set data.styles or pass --data DIR")
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     return layout, styles, (
@@ -50,7 +49,7 @@ def describe(cfg: Config) -> str:
     layout, style_names, source = model_source(cfg)
     num_styles = len(style_names)
     g, d = nnx.eval_shape(
-        lambda: train_state.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
+        lambda: model_build.build_models(cfg, layout.num_rel_joints, num_styles, jax.random.key(0), layout))
     lines = [
         f"config {cfg.name}: {source}",
         f"skeleton: {layout.num_joints} kept joints -> {layout.num_rows} rows; window T = {cfg.data.window_T}, "
