@@ -83,6 +83,24 @@ class DataConfig:
 
 
 @dataclasses.dataclass(frozen=True)
+class WalkerConfig:
+    """The small presets' G: the paper's G with the walker's parts around it (nn/walker.py), each
+    measured in docs/RESULTS.md §5-§10. Every part is on in the presets; a part off is an ablation."""
+    # G adds the skeleton's rest pose to its pose head and the curve's velocity to its root head,
+    # so it starts from a skeleton of the right size on the curve (the paper's G starts near zero).
+    output_prior: bool = True
+    # G's frame: "curve" (G sees the curve from the walker's heading, so the body faces its path
+    # for every rotation; RESULTS §5) or "world" (the paper's).
+    frame: GFrame = "curve"
+    # G's bones take the skeleton's lengths exactly, keeping the directions G outputs (RESULTS §9).
+    exact_bones: bool = True
+    # G keeps a clock in walked distance at a learned per-style stride and sees its phase (RESULTS §10).
+    gait_phase: bool = True
+    # G's root head gives the root's height, not its vertical velocity: no drift off the floor.
+    root_height: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
 class ModelConfig:
     """The networks. Every option below departs from the paper only when on (True, or its
     non-paper value); the small presets turn them on (docs/RESULTS.md §5-§10 measured each)."""
@@ -96,22 +114,16 @@ class ModelConfig:
     # Latent Transform init: "paper" (w ~ 2e-5 at init, as the reference) or "torch_default"
     # (w ~ 0.1: the style path gets gradient from the start; RESULTS §8).
     latent_init: LatentInit = "paper"
-    # G adds the skeleton's rest pose to its pose head and the curve's velocity to its root head,
-    # so it starts from a skeleton of the right size on the curve (the paper's G starts near zero).
-    output_prior: bool = False
-    # G's frame: "world" (the paper) or "curve" (G sees the curve from the walker's heading, so
-    # the body faces its path for every rotation; nn/generator.py, RESULTS §5).
-    g_frame: GFrame = "world"
-    # G's bones take the skeleton's lengths exactly, keeping the directions G outputs (RESULTS §9).
-    exact_bones: bool = False
     # D's real/fake verdict also projects the style label (Miyato & Koyama 2018), so D judges a
     # walk *of that style*, not only through its class head (RESULTS §8).
     d_cond: bool = False
-    # G keeps a clock in walked distance at a learned per-style stride and sees its phase
-    # (nn/generator.py; RESULTS §10).
-    gait_phase: bool = False
-    # G's root head gives the root's height, not its vertical velocity: no drift off the floor.
-    root_height: bool = False
+    # None: the paper's G; a WalkerConfig: the walker around it (the small presets).
+    walker: WalkerConfig | None = None
+
+    @property
+    def gait_phase(self) -> bool:
+        """Whether G keeps a gait clock (a walker with its gait phase on)."""
+        return self.walker is not None and self.walker.gait_phase
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,6 +197,8 @@ class Config:
 
 
 SECTIONS = {"data": DataConfig, "model": ModelConfig, "train": TrainConfig, "compute": ComputeConfig}
+# Optional sub-configs inside a section: (section, field) -> its dataclass (None when off)
+SUBSECTIONS = {("model", "walker"): WalkerConfig}
 
 
 def load_config(path: str | Path, check: bool = True) -> Config:
@@ -240,6 +254,12 @@ def override(cfg: Config, assignments: list[str]) -> Config:
         if len(parts) == 1 and parts[0] == "name":
             cfg = dataclasses.replace(cfg, name=text)
             continue
+        if len(parts) == 3 and tuple(parts[:2]) in SUBSECTIONS:
+            cfg = _override_sub(cfg, parts, text, key)
+            continue
+        if len(parts) == 2 and tuple(parts) in SUBSECTIONS:
+            cfg = _override_sub_whole(cfg, parts, text, key)
+            continue
         if len(parts) != 2 or parts[0] not in SECTIONS:
             raise ConfigError(f"unknown config field {key!r} (use data.X, model.X, train.X or compute.X)")
         section = getattr(cfg, parts[0])
@@ -251,6 +271,31 @@ def override(cfg: Config, assignments: list[str]) -> Config:
     return cfg
 
 
+def _override_sub(cfg: Config, parts: list[str], text: str, key: str) -> Config:
+    """`model.walker.X=value`: one field of a sub-config (made with its defaults if it was off)."""
+    section = getattr(cfg, parts[0])
+    cls = SUBSECTIONS[tuple(parts[:2])]
+    sub = getattr(section, parts[1]) or cls()
+    types = {f.name: str(f.type) for f in dataclasses.fields(cls)}
+    if parts[2] not in types:
+        raise ConfigError(f"unknown config field {key!r}; {parts[0]}.{parts[1]} has: {', '.join(sorted(types))}")
+    value = _parse_value(text, getattr(sub, parts[2]), key, nullable=False)
+    sub = dataclasses.replace(sub, **{parts[2]: value})
+    return dataclasses.replace(cfg, **{parts[0]: dataclasses.replace(section, **{parts[1]: sub})})
+
+
+def _override_sub_whole(cfg: Config, parts: list[str], text: str, key: str) -> Config:
+    """`model.walker=None` (off) or `model.walker=default` (on, every part at its default)."""
+    if text.strip().lower() in ("none", "null", "off"):
+        value = None
+    elif text.strip().lower() in ("default", "on"):
+        value = SUBSECTIONS[tuple(parts)]()
+    else:
+        raise ConfigError(f"{key}: None (off) or default (on), got {text!r}; set one part with {key}.FIELD=VALUE")
+    section = getattr(cfg, parts[0])
+    return dataclasses.replace(cfg, **{parts[0]: dataclasses.replace(section, **{parts[1]: value})})
+
+
 def validate(cfg: Config, *, need_data: bool = True) -> Config:
     """`cfg` if every field is valid, else ConfigError naming the field. need_data=False accepts
     a config without the data directory its label rule needs (a dry run describes the model)."""
@@ -260,8 +305,10 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
         if not ok:
             raise ConfigError(f"{field}: {msg}")
 
-    for section_name, cls in SECTIONS.items():  # the Literal and bool options, from their types
-        section = getattr(cfg, section_name)
+    checked = [(name, cls, getattr(cfg, name)) for name, cls in SECTIONS.items()]
+    checked += [(f"{s}.{f}", cls, getattr(getattr(cfg, s), f)) for (s, f), cls in SUBSECTIONS.items()
+                if getattr(getattr(cfg, s), f) is not None]
+    for section_name, cls, section in checked:  # the Literal and bool options, from their types
         for name, kind in get_type_hints(cls).items():
             value, field = getattr(section, name), f"{section_name}.{name}"
             if get_origin(kind) is Literal:
@@ -300,8 +347,10 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
     need(0.0 <= t.g_ema_decay < 1.0, "train.g_ema_decay", "must be in [0, 1) (0: no average)")
     for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec", "w_g_root_jerk", "w_g_joint_jerk"):
         need(getattr(t, name) >= 0, f"train.{name}", "loss weights must be >= 0")
-    need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride", "needs model.gait_phase (a stride head to train)")
-    need(t.w_g_rec == 0 or m.gait_phase, "train.w_g_rec", "needs model.gait_phase (a phase to reconstruct at)")
+    need(m.walker is None or isinstance(m.walker, WalkerConfig), "model.walker", "None or a WalkerConfig")
+    need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride",
+         "needs model.walker.gait_phase (a stride head to train)")
+    need(t.w_g_rec == 0 or m.gait_phase, "train.w_g_rec", "needs model.walker.gait_phase (a phase to reconstruct at)")
     need(t.w_g_rec == 0 or t.batch_size >= 2, "train.w_g_rec", "needs train.batch_size >= 2 (half is reconstructed)")
     need(t.rec_z == "zero" or t.w_g_rec > 0, "train.rec_z", "needs train.w_g_rec > 0 (a half to reconstruct)")
     need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")
@@ -328,6 +377,11 @@ BOOLEANISED = {
 # Fields that moved to another section or took a clearer name: (old section, old name) -> (section, name).
 MOVED = {("model", "conv_impl"): ("compute", "conv_impl"), ("model", "compute_dtype"): ("compute", "compute_dtype"),
          ("model", "top"): ("model", "base_channels"), ("model", "kw"): ("model", "time_kernel")}
+# The walker's parts were flat model fields before they became model.walker: old name -> new name
+# (each was off at its default: a saved model section with all of them off is the paper's G).
+WALKER_FIELDS = {"output_prior": "output_prior", "g_frame": "frame", "exact_bones": "exact_bones",
+                 "gait_phase": "gait_phase", "root_height": "root_height"}
+WALKER_OFF = {"output_prior": False, "frame": "world", "exact_bones": False, "gait_phase": False, "root_height": False}
 # Presets that were renamed: old config name -> new.
 RENAMED_PRESETS = {"cpu": "small", "bandai_cpu": "bandai_small"}
 
@@ -358,6 +412,10 @@ def upgrade(d: dict) -> dict:
                 if values[name] not in mapping:
                     raise ConfigError(f"{section}.{name} = {values[name]!r}: not a value it ever had")
                 values[name] = mapping[values[name]]
+    model = out.get("model", {})
+    if any(name in model for name in WALKER_FIELDS):
+        parts = {**WALKER_OFF, **{new: model.pop(old) for old, new in WALKER_FIELDS.items() if old in model}}
+        model["walker"] = None if parts == WALKER_OFF else parts
     return out
 
 
@@ -366,12 +424,16 @@ def from_dict(d: dict) -> Config:
     version (`upgrade`); unknown keys are errors, missing fields take their defaults."""
     d = upgrade(d)
 
-    def section(name, cls):
-        values = d.get(name, {})
+    def section(name, cls, values=None):
+        values = d.get(name, {}) if values is None else values
         unknown = set(values) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise ConfigError(f"unknown {cls.__name__} field(s): {', '.join(sorted(unknown))}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()})
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+        for (s, f), sub_cls in SUBSECTIONS.items():
+            if s == name and isinstance(values.get(f), dict):
+                values[f] = section(f"{s}.{f}", sub_cls, values[f])
+        return cls(**values)
 
     return Config(name=d["name"], **{name: section(name, cls) for name, cls in SECTIONS.items()})
 
@@ -430,9 +492,8 @@ def small() -> Config:
         name="small",
         data=DataConfig(label_rule="synthetic", start_offset=1, control_point_interval=128, frame_nums=128,
                         frame_step=4, window_stride=2, val_modulus=5, val_remainder=0),
-        model=ModelConfig(base_channels=16, time_kernel=5, w_dim=32, z_dim=32, output_prior=True, g_frame="curve",
-                          latent_init="torch_default", d_cond=True, exact_bones=True, gait_phase=True,
-                          root_height=True),
+        model=ModelConfig(base_channels=16, time_kernel=5, w_dim=32, z_dim=32, latent_init="torch_default",
+                          d_cond=True, walker=WalkerConfig()),
         train=TrainConfig(batch_size=16, num_steps=7000, lr_d=2e-5, gan_loss="bce_logit", g_ema_decay=0.999,
                           w_g_stride=1.0, w_g_floor=5.0, w_g_skate=5.0, w_g_rec=5.0, w_g_root_jerk=1.0,
                           w_g_joint_jerk=1.0, rec_z="sampled", log_every=50, preview_every=2000, checkpoint_every=1000,

@@ -41,8 +41,16 @@ def test_override_types_and_errors():
     # booleans from true/false; "none" is None only for fields that may be None
     assert C.override(cfg, ["model.d_cond=true"]).model.d_cond is True
     assert C.override(cfg, ["compute.conv_impl=xla"]).compute.conv_impl == "xla"
-    with pytest.raises(C.ConfigError, match="model.output_prior"):
-        C.override(cfg, ["model.output_prior=none"])
+    with pytest.raises(C.ConfigError, match="model.walker.output_prior"):
+        C.override(cfg, ["model.walker.output_prior=none"])
+    # the walker: off (the paper's G), on with every part, or one part set (made with the others on)
+    assert C.override(cfg, ["model.walker=default"]).model.walker == C.WalkerConfig()
+    assert C.override(cfg, ["model.walker.frame=world"]).model.walker == C.WalkerConfig(frame="world")
+    assert C.override(C.small(), ["model.walker=None"]).model.walker is None
+    with pytest.raises(C.ConfigError, match="model.walker: None"):
+        C.override(cfg, ["model.walker=yes"])
+    with pytest.raises(C.ConfigError, match="model.walker has: exact_bones, frame"):
+        C.override(cfg, ["model.walker.stride=1"])
     assert C.override(cfg, ["data.data_dir=/x", "data.data_dir=none"]).data.data_dir is None
     assert C.config_hash(cfg) != C.config_hash(cfg2)
     assert C.config_hash(cfg) == C.config_hash(C.load_config(CONFIGS / "tiny.py"))
@@ -62,9 +70,9 @@ def test_override_types_and_errors():
     ("train.curve_points=3", "train.curve_points"),
     ("compute.conv_impl=cudnn", "compute.conv_impl"),
     ("compute.compute_dtype=float16", "compute.compute_dtype"),
-    ("model.g_frame=body", "model.g_frame"),
+    ("model.walker.frame=body", "model.walker.frame"),
     ("model.d_cond=projection", "model.d_cond"),
-    ("model.gait_phase=1", "model.gait_phase"),
+    ("model.walker.gait_phase=1", "model.walker.gait_phase"),
     ("train.w_g_skate=-1.0", "train.w_g_skate"),
     ("train.w_g_stride=1.0", "train.w_g_stride"),  # needs model.gait_phase
     ("train.w_g_rec=1.0", "train.w_g_rec"),  # likewise
@@ -118,8 +126,9 @@ def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_docum
     paper, small = C.paper().model, C.small().model
     # the small model turns every model option on; the paper's keeps every default
     assert paper == C.ModelConfig(base_channels=64, time_kernel=5, w_dim=64, z_dim=64)
-    assert (small.output_prior, small.d_cond, small.exact_bones, small.gait_phase, small.root_height,
-            small.g_frame, small.latent_init) == (True, True, True, True, True, "curve", "torch_default")
+    assert small.walker == C.WalkerConfig() and (small.d_cond, small.latent_init) == (True, "torch_default")
+    assert (small.walker.output_prior, small.walker.exact_bones, small.walker.gait_phase, small.walker.root_height,
+            small.walker.frame) == (True, True, True, True, "curve")
     assert C.bandai_small().model == small and C.bandai_small().data.frame_nums == 64
     with pytest.raises(C.ConfigError, match="unknown preset 'cpu'"):
         C.preset("cpu")
@@ -128,7 +137,7 @@ def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_docum
 def test_each_option_lists_its_values_once_and_validate_reads_them():
 
     assert C.choices(C.GFrame) == ("world", "curve")
-    for field, literal in (("model.g_frame", C.GFrame), ("model.latent_init", C.LatentInit),
+    for field, literal in (("model.walker.frame", C.GFrame), ("model.latent_init", C.LatentInit),
                            ("train.gan_loss", C.GanLoss), ("compute.conv_impl", C.ConvImpl),
                            ("compute.compute_dtype", C.ComputeDtype), ("data.label_rule", C.LabelRule)):
         for value in C.choices(literal):  # every listed value validates ...

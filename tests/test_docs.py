@@ -34,16 +34,23 @@ def retired_fields() -> set[str]:
     names = {m.group(1) for m in NAME.finditer(record)}
     names |= {f"{s}.{n}" for s, fields in config.RETIRED.items() for n in fields}
     names |= {f"{s}.{n}" for s, n in config.MOVED}
+    names |= {f"model.{n}" for n in config.WALKER_FIELDS}
     return names
 
 
 def config_field(name: str) -> bool | None:
     """True/False for `section.field` of a config section; None when `name` is not of that form."""
     section, _, field = name.partition(".")
-    if section not in config.SECTIONS or "." in field:
+    sub, _, sub_field = field.partition(".")
+    if section not in config.SECTIONS:
         return None
-    fields = {f.name for f in dataclasses.fields(config.SECTIONS[section])}
-    return field in fields or (field in dir(config.SECTIONS[section]) and not field.startswith("_"))
+    cls = config.SECTIONS[section]
+    if (section, sub) in config.SUBSECTIONS and sub_field:
+        cls, field = config.SUBSECTIONS[(section, sub)], sub_field
+    elif "." in field:
+        return None
+    fields = {f.name for f in dataclasses.fields(cls)}
+    return field in fields or (field in dir(cls) and not field.startswith("_"))
 
 
 def resolves(name: str) -> bool:
@@ -89,7 +96,8 @@ def test_every_backticked_name_in_the_docs_exists():
 
 
 @pytest.mark.parametrize("text, bad", [
-    ("`motion.trajectory.velocity` and `train.w_g_stride`", []),
+    ("`motion.trajectory.velocity`, `train.w_g_stride` and `model.walker.frame`", []),
+    ("`model.walker.stride`", ["x.md:1: model.walker.stride"]),
     ("`data.curves.velocity` moved", ["x.md:1: data.curves.velocity"]),
     ("`train.w_g_nothing` and `model.d_feet`", ["x.md:1: train.w_g_nothing"]),
     ("`runs/small/config.json`, `np.asarray`", []),

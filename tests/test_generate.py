@@ -313,8 +313,7 @@ def gait_model(repo):
     from flax import nnx
 
     cfg = override(load_config(repo / "configs" / "tiny.py"),
-                   ["model.output_prior=true", "model.g_frame=curve", "model.gait_phase=true",
-                    "model.root_height=true"])
+                   ["model.walker=default", "model.walker.exact_bones=false"])
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     state = train_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
     from motiongan_jax.nn.walker import STRIDE_GAIN

@@ -26,11 +26,11 @@ TOP, T, B, C = 8, 16, 2, 4
 
 
 def _build_g(num_joints, key):
-    return Generator(num_joints, base_channels=TOP, kt=5, w_dim=64, z_dim=64, num_styles=C, rngs=nnx.Rngs(key))
+    return Generator(num_joints, base_channels=TOP, time_kernel=5, w_dim=64, z_dim=64, num_styles=C, rngs=nnx.Rngs(key))
 
 
 def _build_d(num_joints, key):
-    return Discriminator(num_joints, num_styles=C, seq_len=T, base_channels=TOP, kt=5, rngs=nnx.Rngs(key))
+    return Discriminator(num_joints, num_styles=C, seq_len=T, base_channels=TOP, time_kernel=5, rngs=nnx.Rngs(key))
 
 
 @pytest.fixture(scope="module")
@@ -231,9 +231,9 @@ def test_flatten_is_channel_major():
 @pytest.mark.parametrize("num_styles,g_count,d_count",
                          [(28, 16_156_164, 2_702_173), (29, 16_156_228, 2_706_270)])
 def test_parameter_counts_paper_shapes(num_styles, g_count, d_count):
-    g = nnx.eval_shape(lambda: Generator(27, base_channels=64, kt=5, w_dim=64, z_dim=64, num_styles=num_styles,
+    g = nnx.eval_shape(lambda: Generator(27, base_channels=64, time_kernel=5, w_dim=64, z_dim=64, num_styles=num_styles,
                                          rngs=nnx.Rngs(0)))
-    d = nnx.eval_shape(lambda: Discriminator(27, num_styles=num_styles, seq_len=128, base_channels=64, kt=5,
+    d = nnx.eval_shape(lambda: Discriminator(27, num_styles=num_styles, seq_len=128, base_channels=64, time_kernel=5,
                                              rngs=nnx.Rngs(0)))
     assert count_params(g) == g_count
     assert count_params(d) == d_count

@@ -41,6 +41,13 @@ CFG = validate(Config(data=DataConfig(frame_nums=T, frame_step=1), model=ModelCo
                       train=TrainConfig(batch_size=B)))
 
 
+
+def walker(**on):
+    """A walker config with the given parts on and every other part off (the paper's G's behaviour)."""
+    from motiongan_jax.config import WALKER_OFF, WalkerConfig
+
+    return WalkerConfig(**{**WALKER_OFF, **on})
+
 def _batch():
     k1, k2 = jax.random.split(jax.random.key(42))
     t = jnp.arange(T, dtype=jnp.float32)[None, :, None]
@@ -242,7 +249,8 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     plain_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
                                 model=ModelConfig(base_channels=4, w_dim=8, z_dim=8)))
-    prior_cfg = dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, output_prior=True))
+    prior_cfg = dataclasses.replace(plain_cfg,
+                                    model=dataclasses.replace(plain_cfg.model, walker=walker(output_prior=True)))
     # the modules themselves (eager, no compile): same key, same parameters
     rows = model_build.output_prior_rows(prior_cfg.model, layout)
     plain = model_build.build_generator(plain_cfg.model, layout.num_rel_joints, C, None, jax.random.key(3))
@@ -259,9 +267,9 @@ def test_output_prior_adds_rest_pose_and_curve_velocity_to_the_same_network():
     # the prior's bone lengths at the rest pose are the skeleton's
     bones = np.linalg.norm(np.diff(rest_positions(layout)[np.asarray(layout.bone_pairs)], axis=1)[:, 0], axis=-1)
     np.testing.assert_allclose(bones, layout.bone_lengths_m, rtol=1e-6)
-    with pytest.raises(ValueError, match="output_prior"):
+    with pytest.raises(ValueError, match="model.walker.output_prior"):
         validate(dataclasses.replace(plain_cfg,
-                                     model=dataclasses.replace(plain_cfg.model, output_prior="rest_and_curve")))
+                                     model=dataclasses.replace(plain_cfg.model, walker=walker(output_prior="yes"))))
 
 
 def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
@@ -273,8 +281,9 @@ def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
 
     layout = layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     world_cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
-                                model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True)))
-    curve_cfg = dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="curve"))
+                                model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, walker=walker(output_prior=True))))
+    curve_cfg = dataclasses.replace(world_cfg, model=dataclasses.replace(
+        world_cfg.model, walker=walker(output_prior=True, frame="curve")))
     rows = model_build.output_prior_rows(world_cfg.model, layout)
     world = model_build.build_generator(world_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
     g = model_build.build_generator(curve_cfg.model, layout.num_rel_joints, C, rows, jax.random.key(3))
@@ -301,8 +310,9 @@ def test_curve_frame_g_is_rotation_equivariant_and_starts_facing_its_path():
     facing = np.arctan2(-np.asarray(across[..., 2]), np.asarray(across[..., 0]))
     err = np.angle(np.exp(1j * (facing - np.asarray(trajectory.smooth_heading(vel)))))
     assert np.abs(err).max() < np.radians(2.0)
-    with pytest.raises(ValueError, match="g_frame"):
-        validate(dataclasses.replace(world_cfg, model=dataclasses.replace(world_cfg.model, g_frame="body")))
+    with pytest.raises(ValueError, match="model.walker.frame"):
+        validate(dataclasses.replace(world_cfg, model=dataclasses.replace(
+            world_cfg.model, walker=walker(output_prior=True, frame="body"))))
 
 
 EMA_DECAY = 0.75
@@ -378,7 +388,8 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
     np.testing.assert_allclose(np.asarray(project_bones(rest, bones)), np.asarray(rest), atol=1e-6)
     # a model with exact bones: any w, any curve, every bone has the skeleton's length
     cfg = validate(Config(data=DataConfig(frame_nums=T, frame_step=1),
-                          model=ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True, exact_bones=True)))
+                          model=ModelConfig(base_channels=4, w_dim=8, z_dim=8,
+                                            walker=walker(output_prior=True, exact_bones=True))))
     rest = model_build.output_prior_rows(cfg.model, layout)
     g = model_build.build_generator(cfg.model, layout.num_rel_joints, C, rest, jax.random.key(1),
                                     bones=model_build.generator_bones(cfg.model, layout))
@@ -387,8 +398,8 @@ def test_project_bones_by_hand_and_identity_on_valid_poses():
     joints = np.concatenate([np.zeros((B, T, 1, 3)), np.asarray(pose).reshape(B, T, -1, 3)], 2)
     lengths = np.stack([np.linalg.norm(joints[:, :, b] - joints[:, :, a], axis=-1) for a, b in layout.bone_pairs], -1)
     np.testing.assert_allclose(lengths, np.broadcast_to(layout.bone_lengths_m, lengths.shape), rtol=1e-4, atol=1e-6)
-    with pytest.raises(ValueError, match="exact_bones"):
-        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, exact_bones="yes")))
+    with pytest.raises(ValueError, match="model.walker.exact_bones"):
+        validate(dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, walker=walker(exact_bones="yes"))))
 
 
 def test_gait_phase_by_hand():
@@ -420,9 +431,11 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
     (1 m at init); G stays exactly rotation-equivariant in the curve frame."""
     from motiongan_jax.nn.walker import PHASE_CHANNELS
 
-    base = ModelConfig(base_channels=4, w_dim=8, z_dim=8, output_prior=True, g_frame="curve")
+    base = ModelConfig(base_channels=4, w_dim=8, z_dim=8, walker=walker(output_prior=True, frame="curve"))
     plain = model_build.build_generator(base, J, C, None, jax.random.key(3))
-    g = model_build.build_generator(dataclasses.replace(base, gait_phase=True), J, C, None, jax.random.key(3))
+    g = model_build.build_generator(dataclasses.replace(base, walker=walker(output_prior=True, frame="curve",
+                                                                              gait_phase=True)),
+                                    J, C, None, jax.random.key(3))
     p_plain = dict(nnx.to_flat_state(nnx.state(plain, nnx.Param)))
     p_phase = dict(nnx.to_flat_state(nnx.state(g, nnx.Param)))
     assert set(p_phase) - set(p_plain) == {("stride_head", "kernel"), ("stride_head", "bias")}
@@ -456,7 +469,8 @@ def test_root_height_head_gives_the_velocity_as_a_difference():
     constant; x and z are the velocity head's, as without the option."""
     base = ModelConfig(base_channels=4, w_dim=8, z_dim=8)
     g_vel = model_build.build_generator(base, J, C, None, jax.random.key(3))
-    g_h = model_build.build_generator(dataclasses.replace(base, root_height=True), J, C, None, jax.random.key(3))
+    g_h = model_build.build_generator(dataclasses.replace(base, walker=walker(root_height=True)), J, C, None,
+                                      jax.random.key(3))
     vel = 0.1 * jax.random.normal(jax.random.key(1), (B, T, 3))
     w = g_vel.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
     head, pose = g_vel(vel, w)  # the same parameters: this y is the height head's output
@@ -472,8 +486,8 @@ def _gait_cfg():
     from motiongan_jax.data.gait_stats import GaitTargets
 
     cfg = validate(dataclasses.replace(
-        CFG, model=dataclasses.replace(CFG.model, base_channels=4, g_frame="curve", gait_phase=True, root_height=True,
-                                       latent_init="torch_default"),
+        CFG, model=dataclasses.replace(CFG.model, base_channels=4, latent_init="torch_default",
+                                       walker=walker(frame="curve", gait_phase=True, root_height=True)),
         train=dataclasses.replace(CFG.train, w_g_stride=1.0, w_g_floor=1.0, w_g_skate=1.0)))
     return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), contact_height_m=0.02, toe_joints=(4, 9))
 
@@ -547,7 +561,7 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
     assert b1 - float(state0.g_params["stride_head"]["bias"][...][0]) == pytest.approx(-lr * np.sign(grad_bias),
                                                                                        rel=1e-4)
     with pytest.raises(ValueError, match="gait_phase"):
-        validate(dataclasses.replace(gait_cfg, model=dataclasses.replace(gait_cfg.model, gait_phase=False)))
+        validate(dataclasses.replace(gait_cfg, model=dataclasses.replace(gait_cfg.model, walker=walker(frame="curve"))))
 
 
 def test_reconstructed_half_at_zero_or_sampled_z_and_the_jerk_terms():

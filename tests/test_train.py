@@ -189,13 +189,17 @@ def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
         wider = to_dict(override(tiny, ["model.base_channels=8"]))["model"]
         checkpoint.check_compatible(meta, {"model": wider}, "here")
-    # a checkpoint from before the frame and bone options: those fields are absent from its meta
-    # and mean their defaults; a run with another value is refused
-    older = {k: v for k, v in meta["model"].items() if k not in ("g_frame", "exact_bones")}
-    checkpoint.check_compatible({"model": older}, {"model": to_dict(tiny)["model"]}, "here")
+    # a checkpoint from before the walker section: its flat fields (all off: the paper's G, or only
+    # some of them, absent ones off) load as model.walker; a run with another value is refused
+    older = {k: v for k, v in meta["model"].items() if k != "walker"}
+    checkpoint.check_compatible({"model": {**older, "g_frame": "world", "exact_bones": False}},
+                                {"model": to_dict(tiny)["model"]}, "here")
+    framed = to_dict(override(tiny, ["model.walker=default", "model.walker.output_prior=false",
+                                     "model.walker.exact_bones=false", "model.walker.gait_phase=false",
+                                     "model.walker.root_height=false"]))["model"]
+    checkpoint.check_compatible({"model": {**older, "g_frame": "curve"}}, {"model": framed}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
-        checkpoint.check_compatible({"model": older},
-                                    {"model": to_dict(override(tiny, ["model.g_frame=curve"]))["model"]}, "here")
+        checkpoint.check_compatible({"model": {**older, "g_frame": "world"}}, {"model": framed}, "here")
 
 
 def test_dry_run_prints_parameter_counts(repo, tmp_path):

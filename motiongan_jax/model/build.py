@@ -28,12 +28,12 @@ def count_rel_joints(layout) -> int:
 
 
 def output_prior_rows(model_cfg, layout) -> tuple[float, ...] | None:
-    """The rest pose rows (metres) G adds to its pose head under model.output_prior; None for
-    the paper's G."""
-    if not model_cfg.output_prior:
+    """The rest pose rows (metres) G adds to its pose head under model.walker.output_prior; None
+    otherwise."""
+    if model_cfg.walker is None or not model_cfg.walker.output_prior:
         return None
     if layout is None or layout.rest_offsets_m is None:
-        raise ValueError("model.output_prior needs the skeleton's rest offsets")
+        raise ValueError("model.walker.output_prior needs the skeleton's rest offsets")
     return tuple(float(v) for v in rest_positions(layout)[1:].reshape(-1))
 
 
@@ -51,33 +51,32 @@ def compute_dtype(cfg, dtype: str | None = None) -> str:
 
 
 def generator_bones(model_cfg, layout) -> tuple[tuple[int, int, float], ...] | None:
-    """(parent, child, length in metres) of every bone when model.exact_bones, else None."""
-    if not model_cfg.exact_bones:
+    """(parent, child, length in metres) of every bone when model.walker.exact_bones, else None."""
+    if model_cfg.walker is None or not model_cfg.walker.exact_bones:
         return None
     if layout is None:
-        raise ValueError("model.exact_bones needs the skeleton's bone lengths (a layout)")
+        raise ValueError("model.walker.exact_bones needs the skeleton's bone lengths (a layout)")
     return tuple((int(a), int(b), float(length)) for (a, b), length in zip(layout.bone_pairs, layout.bone_lengths_m))
 
 
 def build_generator(model_cfg, num_rel_joints: int, num_styles: int, rest_pose_R, key, impl: str = "fast",
-             dtype: str = "float32", bones=None) -> Generator:
-    """The paper's G, or the walker around it when the model section asks for any of its options."""
+                    dtype: str = "float32", bones=None) -> Generator:
+    """The paper's G (model.walker None), or the walker around it (nn/walker.py)."""
     m = model_cfg
-    paper = dict(base_channels=m.base_channels, kt=m.time_kernel, w_dim=m.w_dim, z_dim=m.z_dim, num_styles=num_styles,
-                 latent_init=m.latent_init, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype,
-                 rngs=nnx.Rngs(key))
-    if not (m.output_prior or m.g_frame != "world" or bones is not None or m.gait_phase or m.root_height):
+    paper = dict(base_channels=m.base_channels, time_kernel=m.time_kernel, w_dim=m.w_dim, z_dim=m.z_dim,
+                 num_styles=num_styles, latent_init=m.latent_init, length_unit=LENGTH_UNIT_M, impl=impl,
+                 compute_dtype=dtype, rngs=nnx.Rngs(key))
+    if m.walker is None:
         return Generator(num_rel_joints, **paper)
-    return WalkerGenerator(num_rel_joints, rest_pose_R=rest_pose_R, residual_root=m.output_prior, frame=m.g_frame,
-                           bones=bones, gait_phase=m.gait_phase, root_height=m.root_height, **paper)
+    return WalkerGenerator(num_rel_joints, m.walker, rest_pose_R=rest_pose_R, bones=bones, **paper)
 
 
 def build_discriminator(model_cfg, seq_len: int, num_rel_joints: int, num_styles: int, key, impl: str = "fast",
-             dtype: str = "float32") -> Discriminator:
+                        dtype: str = "float32") -> Discriminator:
     """The paper's D, or with model.d_cond its projection variant."""
     build = ProjectionDiscriminator if model_cfg.d_cond else Discriminator
     return build(num_rel_joints, num_styles=num_styles, seq_len=seq_len, base_channels=model_cfg.base_channels,
-                 kt=model_cfg.time_kernel, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype,
+                 time_kernel=model_cfg.time_kernel, length_unit=LENGTH_UNIT_M, impl=impl, compute_dtype=dtype,
                  rngs=nnx.Rngs(key))
 
 
@@ -85,7 +84,7 @@ def build_models(cfg, num_rel_joints: int, num_styles: int, key: jax.Array, layo
                  impl: str | None = None, dtype: str | None = None) -> tuple[Generator, Discriminator]:
     """(G, D) as NNX modules from a full Config, initialised like `init_state` with this key (equal
     up to float rounding: init_state compiles its init). Wrap in nnx.eval_shape for shapes only.
-    `layout` is needed only for model.output_prior and exact_bones; `impl`, `dtype`: see `conv_impl`,
+    `layout` is needed only for the walker's output prior and exact bones; `impl`, `dtype`: see `conv_impl`,
     `compute_dtype`."""
     k_g, k_d = jax.random.split(key)
     impl, dtype = conv_impl(cfg, impl), compute_dtype(cfg, dtype)

@@ -66,12 +66,13 @@ class Discriminator(nnx.Module):
         num_styles: int,
         seq_len: int = 128,
         base_channels: int = 64,
-        kt: int = 5,
+        time_kernel: int = 5,
         length_unit: float = 1.0,
         impl: str = "fast",
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
     ):
+        kt = time_kernel  # the layers' kernel along time (kt in the table above)
         if not 1 <= num_rel_joints <= PADDED_ROWS // 3:
             raise ValueError(f"num_rel_joints must be in 1..{PADDED_ROWS // 3}, got {num_rel_joints}")
         if seq_len % 16:

@@ -98,7 +98,7 @@ class Generator(nnx.Module):
         num_rel_joints: int = 27,
         *,
         base_channels: int = 64,
-        kt: int = 5,
+        time_kernel: int = 5,
         w_dim: int = 64,
         z_dim: int = 64,
         num_styles: int,
@@ -109,6 +109,7 @@ class Generator(nnx.Module):
         compute_dtype: str = "float32",
         rngs: nnx.Rngs,
     ):
+        kt = time_kernel  # the layers' kernel along time (kt in the table above)
         if not 1 <= num_rel_joints <= MAX_JOINTS:
             raise ValueError(f"num_rel_joints must be in 1..{MAX_JOINTS}, got {num_rel_joints}")
         if kt % 2 != 1:

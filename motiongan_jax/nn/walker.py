@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from motiongan_jax.config import GFrame, choices
+from motiongan_jax.config import GFrame, WalkerConfig, choices
 from motiongan_jax.motion import trajectory
 from motiongan_jax.nn.generator import Generator
 from motiongan_jax.nn.layers import Dense, zeros_init
@@ -80,17 +80,23 @@ def gait_phase(phase_BxT: jax.Array) -> jax.Array:
 
 
 class WalkerGenerator(Generator):
-    """The paper's G with the small configs' options (the module docstring): `rest_pose_R` and
-    `residual_root` (model.output_prior), `frame` (model.g_frame), `bones` (model.exact_bones),
-    `gait_phase`, `root_height`. The other arguments are the paper's."""
+    """The paper's G with the walker's parts (the module docstring), as `walker` (config.WalkerConfig)
+    says: the skeleton's rest pose rows `rest_pose_R` (metres) for its output prior, and its bones
+    `bones` ((parent, child, length in metres)) for exact bones. The other arguments are the paper's."""
 
-    def __init__(self, num_rel_joints: int = 27, *, rest_pose_R: tuple[float, ...] | None = None,
-                 residual_root: bool = False, frame: GFrame = "world",
-                 bones: tuple[tuple[int, int, float], ...] | None = None, gait_phase: bool = False,
-                 root_height: bool = False, rngs: nnx.Rngs, **paper):
-        super().__init__(num_rel_joints, side_channels=PHASE_CHANNELS if gait_phase else 0, rngs=rngs, **paper)
+    def __init__(self, num_rel_joints: int = 27, walker: WalkerConfig = WalkerConfig(), *,
+                 rest_pose_R: tuple[float, ...] | None = None,
+                 bones: tuple[tuple[int, int, float], ...] | None = None, rngs: nnx.Rngs, **paper):
+        super().__init__(num_rel_joints, side_channels=PHASE_CHANNELS if walker.gait_phase else 0, rngs=rngs,
+                         **paper)
+        if rest_pose_R is not None and not walker.output_prior:
+            raise ValueError("rest pose rows given, but the walker's output prior is off (walker.output_prior)")
+        if (bones is None) == walker.exact_bones:
+            raise ValueError("exact bones (walker.exact_bones) need the skeleton's bones, and only they")
         if rest_pose_R is not None and len(rest_pose_R) != self.num_rows:
             raise ValueError(f"rest_pose_R has {len(rest_pose_R)} rows, G makes {self.num_rows}")
+        frame, gait_phase, root_height = walker.frame, walker.gait_phase, walker.root_height
+        residual_root = walker.output_prior
         # a tuple of floats: static (part of the graph definition), not a parameter
         self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
         self.residual_root = bool(residual_root)
