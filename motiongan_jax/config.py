@@ -361,6 +361,11 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
 # Saved configs: the one map from older schemas to this one
 # ---------------------------------------------------------------------------------------------
 
+# The saved form's schema: 2 since model.walker (Dec 7); configs saved before carry no number and
+# are schema 1. `upgrade` reads every schema from OLDEST_SCHEMA on.
+SCHEMA = 2
+OLDEST_SCHEMA = 1
+
 # Options that no longer exist, with the only value any preset used: a saved config holding that
 # value loads without them; one that used another value is refused (docs/RESULTS.md, "Retired
 # options", keeps their record).
@@ -387,11 +392,17 @@ RENAMED_PRESETS = {"cpu": "small", "bandai_cpu": "bandai_small"}
 
 
 def upgrade(d: dict) -> dict:
-    """A saved config dict (to_dict's form, from any earlier version) in this version's schema:
-    retired options at their only value dropped, string options that became booleans mapped,
-    moved or renamed fields in their new place, renamed presets under their new name. ConfigError for a
-    saved config that used a retired option, or an old string value that has no boolean."""
-    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in d.items()}
+    """A saved config dict (to_dict's form) of any schema from OLDEST_SCHEMA (1: every config saved
+    before Dec 7, which has no "schema" entry) to SCHEMA, in this version's schema: retired options
+    at their only value dropped, string options that became booleans mapped, moved or renamed
+    fields in their new place, the walker's flat fields as model.walker, renamed presets under
+    their new name. ConfigError for a saved config that used a retired option, an old string value
+    that has no boolean, or a schema this version does not know."""
+    schema = d.get("schema", 1)
+    if not isinstance(schema, int) or not OLDEST_SCHEMA <= schema <= SCHEMA:
+        raise ConfigError(f"saved config of schema {schema!r}: this version reads schemas {OLDEST_SCHEMA} to "
+                          f"{SCHEMA} (a newer version of motiongan_jax wrote it?)")
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in d.items() if k != "schema"}
     out["name"] = RENAMED_PRESETS.get(out.get("name"), out.get("name", "restored"))
     for (section, name), (new_section, new_name) in MOVED.items():
         values = out.get(section, {})
@@ -435,11 +446,15 @@ def from_dict(d: dict) -> Config:
                 values[f] = section(f"{s}.{f}", sub_cls, values[f])
         return cls(**values)
 
+    unknown = set(d) - set(SECTIONS) - {"name"}
+    if unknown:
+        raise ConfigError(f"unknown config entries: {', '.join(sorted(unknown))}")
     return Config(name=d["name"], **{name: section(name, cls) for name, cls in SECTIONS.items()})
 
 
 def to_dict(cfg: Config) -> dict:
-    return dataclasses.asdict(cfg)
+    """The saved form: every field, and the schema it is written in."""
+    return {"schema": SCHEMA, **dataclasses.asdict(cfg)}
 
 
 def config_hash(cfg: Config | dict) -> str:

@@ -176,3 +176,24 @@ def test_a_run_config_written_before_the_compute_section_loads_as_the_small_pres
         bad[section][name] = value
         with pytest.raises(C.ConfigError, match=f"{section}.{name}"):
             C.from_dict(bad)
+
+
+def test_saved_configs_carry_their_schema_and_older_ones_load():
+    """to_dict writes the schema number; a config without one is schema 1 (saved before
+    model.walker): its flat walker fields load as model.walker; an unknown schema is refused."""
+    small = C.small()
+    d = C.to_dict(small)
+    assert d["schema"] == C.SCHEMA == 2 and C.OLDEST_SCHEMA == 1
+    old = {k: v for k, v in d.items() if k != "schema"}
+    old["model"] = {**{k: v for k, v in d["model"].items() if k != "walker"},
+                    "output_prior": True, "g_frame": "curve", "exact_bones": True, "gait_phase": True,
+                    "root_height": True}
+    assert C.from_dict(old) == small
+    paper = {k: v for k, v in C.to_dict(C.tiny()).items() if k != "schema"}
+    paper["model"] = {**{k: v for k, v in paper["model"].items() if k != "walker"}, "g_frame": "world"}
+    assert C.from_dict(paper).model.walker is None
+    for bad in (3, "2", 0):
+        with pytest.raises(C.ConfigError, match="schemas 1 to 2"):
+            C.from_dict({**d, "schema": bad})
+    with pytest.raises(C.ConfigError, match="unknown config entries: extra"):
+        C.from_dict({**d, "extra": 1})

@@ -13,7 +13,7 @@ import chex
 import jax
 import numpy as np
 import pytest
-from conftest import load_cli, random_run
+from conftest import load_cli, random_run, run_cli
 
 from motiongan_jax.config import config_hash, from_dict, load_config, override
 from motiongan_jax.data import curves
@@ -227,3 +227,40 @@ def test_analyze_cli_uses_the_shipped_model_without_a_workdir(repo, shipped, tmp
     report = json.loads((tmp_path / "a" / "analysis.json").read_text())
     assert report["workdir"] is None and report["model"] == pretrained.SHIPPED_MODEL.name
     assert report["step"] == shipped.provenance["steps"] and report["style_names"] == shipped.meta["style_names"]
+
+
+def test_an_export_of_the_old_schema_upgrades_to_the_same_weights(exported, tmp_path):
+    """An export whose meta holds a schema-1 config (no schema number, the walker's parts as flat
+    model fields, what every export before model.walker holds) loads, and `--upgrade` rewrites it
+    in today's schema: the same weights and params_sha256, the old digests kept in its provenance."""
+    from motiongan_jax.config import SCHEMA, WALKER_FIELDS, WALKER_OFF
+
+    good = exported[0]
+    old = tmp_path / "old.npz"
+
+    def to_schema_1(z):
+        meta = json.loads(str(z["meta"]))
+        config = {k: v for k, v in meta["config"].items() if k != "schema"}
+        model = dict(config["model"])
+        walker = model.pop("walker") or WALKER_OFF
+        model.update({old_name: walker[new] for old_name, new in WALKER_FIELDS.items()})
+        meta["config"] = {**config, "model": model}
+        z["meta"] = np.array(json.dumps(meta, sort_keys=True))
+
+    _rewrite(good, old, to_schema_1)
+    entries = _entries(old)
+    entries["sha256"] = np.array(_sha256(entries, [n for n in entries if n != "sha256"]))  # a valid old file
+    _rewrite(old, old, lambda z: z.update(sha256=entries["sha256"]))
+    before = pretrained.read_export(old)
+    assert "schema" not in before.meta["config"] and "g_frame" in before.meta["config"]["model"]
+    new = tmp_path / "new.npz"
+    assert run_cli("export_model", ["--upgrade", str(old), "--out", str(new)])[0] == 0
+    after = pretrained.read_export(new)
+    assert after.meta["config"]["schema"] == SCHEMA and "walker" in after.meta["config"]["model"]
+    assert after.params_sha256 == before.params_sha256 == pretrained.read_export(good).params_sha256
+    assert after.provenance["upgraded_from"] == {"config_hash": before.provenance["config_hash"],
+                                                 "sha256": before.sha256}
+    a, b = pretrained.load_export(old)[0], pretrained.load_export(new)[0]
+    assert all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a.g_params), jax.tree.leaves(b.g_params)))
+    code, _, err = run_cli("export_model", ["--upgrade", str(tmp_path / "missing.npz"), "--out", str(new)])
+    assert code == 2 and "not found" in err

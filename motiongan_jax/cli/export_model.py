@@ -3,6 +3,7 @@ small .npz with its provenance and a checksum (motiongan_jax/train/pretrained.py
 
   python bin/export_model.py --workdir runs/small --out model.npz [--step N] [--params ema|raw]
   python bin/export_model.py --info model.npz          # check a file and print its provenance
+  python bin/export_model.py --upgrade old.npz --out model.npz   # an older export in today's schema
 
 The export loads wherever a run's --workdir does: `bin/generate.py --model model.npz`,
 `bin/analyze.py --model model.npz`, `motiongan-demo --model model.npz`. Prints the provenance
@@ -25,11 +26,13 @@ def main(argv=None) -> int:
     what = ap.add_mutually_exclusive_group(required=True)
     what.add_argument("--workdir", help="a training run's directory (with checkpoints/)")
     what.add_argument("--info", metavar="FILE", help="verify an export and print its provenance")
+    what.add_argument("--upgrade", metavar="FILE", help="rewrite an older export's config in today's schema "
+                      "(same weights) to --out")
     ap.add_argument("--out", help="the export file to write (.npz)")
     add_checkpoint_arguments(ap)
     args = ap.parse_args(argv)
-    if args.workdir is not None and not args.out:
-        ap.error("--workdir needs --out FILE.npz")
+    if (args.workdir is not None or args.upgrade is not None) and not args.out:
+        ap.error("--workdir and --upgrade need --out FILE.npz")
     if args.out and not args.out.endswith(".npz"):
         ap.error(f"--out must end in .npz, got {args.out!r}")
 
@@ -41,6 +44,8 @@ def main(argv=None) -> int:
             export = pretrained.read_export(args.info)
             info = {**export.provenance, "params_sha256": export.params_sha256, "sha256": export.sha256,
                     "style_names": export.meta["style_names"]}
+        elif args.upgrade:
+            info = pretrained.upgrade_export(args.upgrade, args.out)
         else:
             info = pretrained.export_run(args.workdir, args.out, step=args.step, params=args.params)
     except (CheckpointError, OSError) as err:

@@ -120,7 +120,13 @@ def export_state(out, state, meta: dict, *, params: str) -> dict:
         "source_commit": commit, "source_modified": dirty,
         "jax": jax.__version__, "flax": flax.__version__, "numpy": np.__version__,
     }
-    meta = {**meta, "data_dir": None}
+    return _write_export(out, arrays, {**meta, "data_dir": None}, provenance)
+
+
+def _write_export(out, params: dict[str, np.ndarray], meta: dict, provenance: dict) -> dict:
+    """Writes G's flat parameters with meta and provenance, both digests taken, atomically and
+    deterministically; returns the provenance with the digests."""
+    arrays = dict(params)
     arrays["meta"] = np.array(json.dumps(meta, sort_keys=True))
     arrays["provenance"] = np.array(json.dumps(provenance, sort_keys=True))
     arrays["params_sha256"] = np.array(_digest(arrays, [n for n in arrays if n.startswith(_PARAM_PREFIX)]))
@@ -138,6 +144,25 @@ def export_state(out, state, meta: dict, *, params: str) -> dict:
                 np.lib.format.write_array(buf, _c_order(arrays[name]), allow_pickle=False)
                 zf.writestr(info, buf.getvalue())
     return {**provenance, "params_sha256": str(arrays["params_sha256"]), "sha256": str(arrays["sha256"])}
+
+
+def upgrade_export(path, out) -> dict:
+    """An export written by an earlier version, rewritten with its meta's config in the current
+    schema (config.upgrade; the weights untouched, so `params_sha256` stays); the provenance keeps
+    the old config hash and file digest under "upgraded_from". Returns the new provenance."""
+    from motiongan_jax.config import ConfigError, config_hash, from_dict, to_dict
+
+    old = read_export(path)
+    try:
+        config = to_dict(from_dict(old.meta["config"]))
+    except (ConfigError, KeyError, TypeError) as err:
+        raise ExportError(f"model file {old.path}: its config cannot be upgraded ({err})") from None
+    provenance = {**old.provenance, "config_hash": config_hash(config),
+                  "upgraded_from": {"config_hash": old.provenance["config_hash"], "sha256": old.sha256}}
+    info = _write_export(out, old.params, {**old.meta, "config": config}, provenance)
+    if info["params_sha256"] != old.params_sha256:  # the same arrays digest the same: a guard
+        raise ExportError(f"upgrading {old.path} changed its weights")
+    return info
 
 
 def export_run(workdir, out, *, step: int | None = None, params: str = "ema") -> dict:
