@@ -208,7 +208,7 @@ def test_the_demo_limits_lie_inside_generates_which_apply_too(client, monkeypatc
     def no_g(*args):
         raise AssertionError("G ran")
 
-    monkeypatch.setattr(walk, "_apply_g", no_g)
+    monkeypatch.setattr(model_apply, "g_apply", no_g)
     monkeypatch.setattr(limits, "MAX_CURVE_LENGTH_M", 2.0)
     r = _post(client, "/api/generate", {"points": _line(32), "styles": ["Happy"]})  # 2.5 m
     assert r.status_code == 400, r.get_json()

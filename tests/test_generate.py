@@ -375,14 +375,15 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     restarted clock: the phase, not the statistics, is what a restart would break."""
     state, layout = gait_model
     M, L = 1530, 1024
-    monkeypatch.setattr(walk, "_apply_g", _compiled_fast(model_apply.g_apply))
+    monkeypatch.setattr(model_apply, "g_apply", _compiled_fast(model_apply.g_apply))
     real = model_apply.g_apply
     full = _wandering(1536, straight_from=1500)
     w = styles.spec_codes(state, [styles.parse_style(n, NAMES) for n in ("Sad", "Happy")], NAMES)
     phi0 = np.array([0.5, 4.0])
     ref = walk.generate_motion(state, layout, full, w, phi0)
     calls, progress = [], []
-    monkeypatch.setattr(walk, "_apply_g", lambda st, v, ww, ph: (calls.append((v, ww, ph)), real(st, v, ww, ph))[1])
+    monkeypatch.setattr(model_apply, "g_apply",
+                        lambda st, v, ww, ph: (calls.append((v, ww, ph)), real(st, v, ww, ph))[1])
     one = walk.generate_motion(state, layout, full[:M], w, phi0)
     assert [c[0].shape for c in calls] == [(2, 1536, 3)]
     calls.clear()
@@ -440,7 +441,7 @@ def test_motions_are_generated_in_groups_that_fit_batch_samples(run, monkeypatch
                                       v.shape[:2] + (layout.num_rows,))
         return root, pose
 
-    monkeypatch.setattr(walk, "_apply_g", fake_g)
+    monkeypatch.setattr(model_apply, "g_apply", fake_g)
     curve = _wandering(T_LONG)
     w = np.random.default_rng(1).normal(size=(5, 8)).astype(np.float32)
     one = walk.generate_motion(state, layout, curve, w)

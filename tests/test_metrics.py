@@ -10,6 +10,7 @@ import scipy.stats
 
 from motiongan_jax.analysis.style_space import pca
 from motiongan_jax.evaluation import metrics as M
+from motiongan_jax.motion import gait
 
 
 def _line(T, step_m, direction=(1.0, 0.0)):
@@ -280,8 +281,8 @@ def test_foot_skate_original():
 
 def test_contact_height_threshold():
     heights = np.arange(11) * 0.01  # 0 .. 0.1 m: the 10th percentile is the second value
-    assert M.contact_height_threshold(heights) == pytest.approx(0.01)
-    assert M.contact_height_threshold(heights, percentile=50.0) == pytest.approx(0.05)
+    assert gait.contact_height_threshold(heights) == pytest.approx(0.01)
+    assert gait.contact_height_threshold(heights, percentile=50.0) == pytest.approx(0.05)
 
 
 def test_skate_ratio():
@@ -330,15 +331,15 @@ def _walker(seconds=10.0, fps=30.0, cycle_hz=0.9, speed=1.2, stance=0.6, lift=0.
 def test_gait_of_an_ideal_walker():
     fps = 30.0
     toes = _walker(fps=fps)
-    h = M.toe_heights(toes)
+    h = gait.toe_heights(toes)
     chex.assert_shape(h, (len(toes), 2))
-    assert M.support(h, 0.02) == 1.0  # stance 0.6 > 0.5: a foot is always down
-    assert M.lower_foot_height(h) == 0.0
-    assert M.alternation(h) > 0.4
-    assert M.step_frequency_hz(h, fps) == pytest.approx(0.9, rel=0.01)
+    assert gait.support(h, 0.02) == 1.0  # stance 0.6 > 0.5: a foot is always down
+    assert gait.lower_foot_height(h) == 0.0
+    assert gait.alternation(h) > 0.4
+    assert gait.step_frequency_hz(h, fps) == pytest.approx(0.9, rel=0.01)
     assert M.foot_skate_original(toes[::2]) == 0.0  # planted toes do not move (15 Hz samples)
     assert M.skate_ratio(toes, fps, 0.02) == 0.0
-    assert M.height_range_m(np.stack([np.zeros(10), np.full(10, 0.9), np.zeros(10)], -1)) == 0.0
+    assert gait.height_range_m(np.stack([np.zeros(10), np.full(10, 0.9), np.zeros(10)], -1)) == 0.0
 
 
 def test_gait_of_a_glider_a_floater_and_a_hopper():
@@ -349,19 +350,19 @@ def test_gait_of_a_glider_a_floater_and_a_hopper():
     glide = np.zeros((T, 2, 3))
     glide[:, :, 2] = 1.2 * t[:, None]
     glide[:, 1, 0] = -0.2
-    h = M.toe_heights(glide)
-    assert M.support(h, 0.02) == 1.0 and M.lower_foot_height(h) == 0.0
-    assert math.isnan(M.alternation(h)) and math.isnan(M.step_frequency_hz(h, fps))
+    h = gait.toe_heights(glide)
+    assert gait.support(h, 0.02) == 1.0 and gait.lower_foot_height(h) == 0.0
+    assert math.isnan(gait.alternation(h)) and math.isnan(gait.step_frequency_hz(h, fps))
     assert M.skate_ratio(glide, fps, 0.02) == 1.0
     # floater: a walker whose whole body rises 0.4 m over the clip; above the floor (the 5th
     # percentile of the lower toe, near the start) the lower toe's mean height is ~0.2 m
     float_ = _walker(seconds=T / fps, fps=fps)
     float_[..., 1] += np.linspace(0.0, 0.4, T)[:, None]
-    h = M.toe_heights(float_)
-    assert M.lower_foot_height(h) == pytest.approx(0.2 - np.percentile(np.linspace(0.0, 0.4, T), 5), abs=0.01)
+    h = gait.toe_heights(float_)
+    assert gait.lower_foot_height(h) == pytest.approx(0.2 - np.percentile(np.linspace(0.0, 0.4, T), 5), abs=0.01)
     # the floor is 0.02 m up the rise (its 5th percentile): a toe within 2 cm of it only while the
     # rise is below 0.04 m, the first 10 % of the clip
-    assert M.support(h, 0.02) == pytest.approx(0.1, abs=0.01)
+    assert gait.support(h, 0.02) == pytest.approx(0.1, abs=0.01)
     # hopper: both feet together, airborne (a half-sine of 0.1 m) half of each 1 Hz cycle; sampled
     # finely so that the share of frames is the share of time
     t = np.arange(3000) / 300.0
@@ -369,11 +370,11 @@ def test_gait_of_a_glider_a_floater_and_a_hopper():
     frac = (t * 1.0) % 1.0
     hop[:, :, 1] = (0.1 * np.sin(np.pi * np.clip(2 * frac - 1, 0, 1)))[:, None]
     hop[:, 1, 0] = -0.2
-    h = M.toe_heights(hop)
-    assert M.alternation(h) == pytest.approx(-1.0)
+    h = gait.toe_heights(hop)
+    assert gait.alternation(h) == pytest.approx(-1.0)
     # on the floor (below 2 cm) for the grounded half plus the first and last 6.4 % of the flight
-    assert M.support(h, 0.02) == pytest.approx(0.5 + 0.5 * 2 * np.arcsin(0.2) / np.pi, abs=0.02)
-    assert M.step_amplitude_m(h) == 0.0 and math.isnan(M.step_frequency_hz(h, 300.0))
+    assert gait.support(h, 0.02) == pytest.approx(0.5 + 0.5 * 2 * np.arcsin(0.2) / np.pi, abs=0.02)
+    assert gait.step_amplitude_m(h) == 0.0 and math.isnan(gait.step_frequency_hz(h, 300.0))
 
 
 @pytest.mark.parametrize("cycle_hz, fps, seconds", [(0.5, 15.0, 8.5), (0.93, 15.0, 8.5), (1.25, 30.0, 4.3),
@@ -384,10 +385,10 @@ def test_step_frequency_of_sinusoidal_steps(cycle_hz, fps, seconds):
     t = np.arange(int(seconds * fps)) / fps
     s = 0.05 * np.sin(2 * np.pi * cycle_hz * t + 0.3)
     h = np.stack([0.05 + s, 0.05 - s], -1) + 0.02 * t[:, None]
-    assert M.step_frequency_hz(h, fps) == pytest.approx(cycle_hz, rel=0.02)
-    assert M.step_amplitude_m(h) == pytest.approx(0.1 / np.sqrt(2), rel=0.05)
+    assert gait.step_frequency_hz(h, fps) == pytest.approx(cycle_hz, rel=0.02)
+    assert gait.step_amplitude_m(h) == pytest.approx(0.1 / np.sqrt(2), rel=0.05)
     # a clip shorter than one cycle of the band's lowest frequency (0.4 Hz): unknown
-    assert math.isnan(M.step_frequency_hz(h[: int(2.4 * fps)], fps))
+    assert math.isnan(gait.step_frequency_hz(h[: int(2.4 * fps)], fps))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -562,8 +563,8 @@ BAD_INPUTS = [
     (lambda: M.foot_skate_original(np.zeros((5, 3, 3))), "toes_world_Tx2x3.*size 2"),
     (lambda: M.foot_skate_original(_TOES[:1]), "toes_world_Tx2x3.*at least 2"),
     (lambda: M.foot_skate_original(_TOES, threshold_m=-1.0), "threshold_m"),
-    (lambda: M.contact_height_threshold(np.zeros((3, 2))), "foot_heights_real_N.*rank"),
-    (lambda: M.contact_height_threshold(np.zeros(3), percentile=101), "percentile"),
+    (lambda: gait.contact_height_threshold(np.zeros((3, 2))), "foot_heights_real_N.*rank"),
+    (lambda: gait.contact_height_threshold(np.zeros(3), percentile=101), "percentile"),
     (lambda: M.skate_ratio(_TOES, 0.0, 0.05), "fps"),
     (lambda: M.skate_ratio(_TOES, 30.0, np.nan), "height_threshold_m"),
     (lambda: M.skate_ratio(_TOES[..., :2], 30.0, 0.05), "toes_world_Tx2x3.*size 3"),
@@ -580,13 +581,13 @@ BAD_INPUTS = [
     (lambda: M.nearest_centroid(np.zeros((3, 2)), np.zeros((4, 3))), "centroids_CxD.*size 2"),
     (lambda: M.nearest_centroid_accuracy(np.zeros((3, 2)), np.zeros(2, int), np.zeros((4, 2))), "labels_N.*length"),
     (lambda: M.mean_ci95([]), "values.*empty"),
-    (lambda: M.toe_heights(np.zeros((5, 2))), "toes_world_Tx2x3.*rank"),
-    (lambda: M.toe_heights(_TOES, floor_percentile=-1), "floor_percentile"),
-    (lambda: M.support(np.zeros((5, 2)), 0.0), "contact_height_m"),
-    (lambda: M.alternation(np.zeros((5, 3))), "heights_Tx2.*size 2"),
-    (lambda: M.step_frequency_hz(np.zeros((50, 2)), 0.0), "fps"),
-    (lambda: M.step_frequency_hz(np.zeros((50, 2)), 30.0, band_hz=(2.0, 1.0)), "band_hz"),
-    (lambda: M.height_range_m(np.zeros((5, 2))), "root_Tx3.*size 3"),
+    (lambda: gait.toe_heights(np.zeros((5, 2))), "toes_world_Tx2x3.*rank"),
+    (lambda: gait.toe_heights(_TOES, floor_percentile=-1), "floor_percentile"),
+    (lambda: gait.support(np.zeros((5, 2)), 0.0), "contact_height_m"),
+    (lambda: gait.alternation(np.zeros((5, 3))), "heights_Tx2.*size 2"),
+    (lambda: gait.step_frequency_hz(np.zeros((50, 2)), 0.0), "fps"),
+    (lambda: gait.step_frequency_hz(np.zeros((50, 2)), 30.0, band_hz=(2.0, 1.0)), "band_hz"),
+    (lambda: gait.height_range_m(np.zeros((5, 2))), "root_Tx3.*size 3"),
 ]
 
 

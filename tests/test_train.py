@@ -124,8 +124,8 @@ def test_sigkill_and_restart_equals_unbroken(unbroken, repo, tmp_path):
 def test_non_finite_stops_with_step_and_term(tiny, tmp_path, monkeypatch):
     real = sampling.make_sample_batch
 
-    def poisoned(cfg, batch_size):
-        sample = real(cfg, batch_size)
+    def poisoned(cfg, batch_size, rec_rows=0):
+        sample = real(cfg, batch_size, rec_rows)
 
         def sample_batch(arrays, key, step):
             batch = sample(arrays, key, step)
@@ -216,8 +216,8 @@ def test_training_on_one_batch_makes_g_follow_its_curves(tiny, tmp_path, monkeyp
     rounding of another CPU can undo; on one batch it falls ~500x.)"""
     real = sampling.make_sample_batch
 
-    def first_batch_only(cfg, batch_size):
-        sample = real(cfg, batch_size)
+    def first_batch_only(cfg, batch_size, rec_rows=0):
+        sample = real(cfg, batch_size, rec_rows)
         return lambda arrays, key, step: sample(arrays, key, 0)
 
     monkeypatch.setattr(sampling, "make_sample_batch", first_batch_only)
