@@ -464,6 +464,74 @@ def height_range_m(root_Tx3) -> float:
     return float(np.ptp(_float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3))[:, 1]))
 
 
+def walking_speed_mps(root_Tx3, fps: float) -> float:
+    """Mean walking speed (m/s): the root's floor path length over the clip's duration."""
+    root = _float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    return _path_length(root) * _positive(fps, "fps") / (root.shape[0] - 1)
+
+
+def distance_per_cycle_m(root_Tx3, heights_Tx2, fps: float) -> float:
+    """Distance walked per gait cycle (metres; one left and one right step): walking speed over
+    step frequency (`step_frequency_hz`). nan where the step frequency is."""
+    return walking_speed_mps(root_Tx3, fps) / step_frequency_hz(heights_Tx2, fps)
+
+
+def counted_gait_cycles(root_Tx3, heights_Tx2, fps: float, hysteresis: float = 0.3) -> dict:
+    """Gait cycles counted, not read off a spectrum: the left − right toe height (its 2-second
+    moving average removed) crosses from above +h to below −h and back, h = `hysteresis` × its
+    std, twice per cycle. Returns {"cycles": half-cycles between the first and last crossing / 2,
+    "distance_m": the root's floor path between them, "stride_m": distance per counted cycle,
+    "frequency_hz": cycles per second between them}; nan values with fewer than 3 crossings."""
+    root = _float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    h = _float_array(heights_Tx2, "heights_Tx2", 2, shape=(root.shape[0], 2), min_len=2)
+    fps = _positive(fps, "fps")
+    d = h[:, 0] - h[:, 1]
+    w = max(int(round(2.0 * fps)), 1)
+    d = d - np.convolve(np.pad(d, (w // 2, w - 1 - w // 2), mode="edge"), np.ones(w) / w, mode="valid")
+    thr = hysteresis * np.std(d)
+    state, crossings = 0, []
+    for t, v in enumerate(d):
+        s = 1 if v > thr else (-1 if v < -thr else 0)
+        if s and s != state:
+            if state:
+                crossings.append(t)
+            state = s
+    nan = {"cycles": float("nan"), "distance_m": float("nan"), "stride_m": float("nan"),
+           "frequency_hz": float("nan")}
+    if len(crossings) < 3:
+        return nan
+    a, b = crossings[0], crossings[-1]
+    cycles = (len(crossings) - 1) / 2
+    dist = _path_length(root[a:b + 1])
+    return {"cycles": cycles, "distance_m": dist, "stride_m": dist / cycles, "frequency_hz": cycles * fps / (b - a)}
+
+
+def linear_fit(x_N, y_N, groups_N=None) -> dict:
+    """Least-squares line y = a + b·x: {"slope": b, "intercept": a (nan with groups), "n"}. With
+    `groups_N`, one intercept per group and a common slope (the slope within groups, e.g. within
+    styles: a style's own level does not tilt it). nan slope when x does not vary (within groups)."""
+    x = _float_array(x_N, "x_N", 1)
+    y = _float_array(y_N, "y_N", 1)
+    _same_len(x, "x_N", y, "y_N")
+    if groups_N is None:
+        xc, yc = x - x.mean(), y - y.mean()
+    else:
+        g = np.asarray(groups_N)
+        if g.shape != x.shape:
+            raise ValueError(f"groups_N: shape {g.shape} does not match x_N {x.shape}")
+        xc, yc = x.copy(), y.copy()
+        for k in np.unique(g):
+            m = g == k
+            xc[m] -= x[m].mean()
+            yc[m] -= y[m].mean()
+    sxx = float(np.sum(xc * xc))
+    if sxx <= 1e-12 * max(float(np.sum(x * x)), 1e-300):
+        return {"slope": float("nan"), "intercept": float("nan"), "n": int(len(x))}
+    b = float(np.sum(xc * yc) / sxx)
+    a = float(y.mean() - b * x.mean()) if groups_N is None else float("nan")
+    return {"slope": b, "intercept": a, "n": int(len(x))}
+
+
 # ---------------------------------------------------------------------------------------------
 # 9-10. Style space
 
