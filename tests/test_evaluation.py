@@ -6,6 +6,7 @@ an evaluator trained for a few steps) and check the report's structure and the r
 whose values are known: real motion on its own curve has bone error ~0 and path ratio ~1.
 """
 
+import dataclasses
 import json
 import shutil
 
@@ -77,6 +78,34 @@ def test_evaluator_learns_is_deterministic_and_round_trips(tmp_path):
 
     other = evaluator.train(sample, 6, ("a", "b", "c"), ecfg.__class__(**{**ecfg.__dict__, "seed": 1}))
     assert other.checksum != ev.checksum
+
+
+def test_speed_free_evaluator_reads_poses_not_their_order(tmp_path):
+    """The speed-free variant scores a window and the same window with its frames shuffled (or
+    played at another rate: each frame twice) alike; the temporal evaluator does not. It still
+    learns the toy styles, and its kind survives saving."""
+    sample = _toy_sampler()
+    ecfg = evaluator.EvaluatorConfig(channels=(8, 8, 8), steps=60, batch_size=32, lr=3e-3, speed_free=True)
+    ev = evaluator.train(sample, 6, ("a", "b", "c"), ecfg)
+    test = sample(jax.random.key(99), 0)
+    root, pose = np.asarray(test["root_BxTx3"]), np.asarray(test["pose_BxTxR"])
+    logits, _ = evaluator.classify(ev, root, pose)
+    assert np.mean(np.argmax(logits, -1) == np.asarray(test["label_B"])) > 0.9
+    perm = np.asarray(jax.random.permutation(jax.random.key(3), 16))
+    shuffled, _ = evaluator.classify(ev, root, pose[:, perm])
+    np.testing.assert_allclose(shuffled, logits, atol=1e-4)
+    half = np.repeat(pose[:, :8], 2, axis=1)  # the first half of each window, each pose held twice
+    slow, _ = evaluator.classify(ev, root, half)
+    fast, _ = evaluator.classify(ev, root, np.concatenate([pose[:, :8], pose[:, :8]], 1))
+    np.testing.assert_allclose(slow, fast, atol=1e-4)
+    temporal = evaluator.train(sample, 6, ("a", "b", "c"), dataclasses.replace(ecfg, speed_free=False))
+    a, _ = evaluator.classify(temporal, root, pose)
+    b, _ = evaluator.classify(temporal, root, pose[:, perm])
+    assert np.max(np.abs(a - b)) > 1e-3
+    npz, _ = evaluator.save(ev, tmp_path / "sf.npz")
+    loaded = evaluator.load(npz)
+    assert loaded.meta["config"]["speed_free"] is True and loaded.checksum == ev.checksum
+    np.testing.assert_array_equal(evaluator.classify(loaded, root, pose)[0], logits)
 
 
 def test_evaluator_load_rejects_damage_and_missing_files(tmp_path):
