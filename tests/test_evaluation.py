@@ -198,10 +198,14 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     ev = evaluator.load(tiny_run / "evaluator.npz")
     assert ev.meta["real_heldout"]["windows"] > 0
 
+    assert train_ev(["--workdir", str(tiny_run), "--steps", "5", "--speed-free"]) == 0
+    sf = evaluator.load(tiny_run / "evaluator_speed_free.npz")
+    assert sf.meta["config"]["speed_free"] and sf.checksum in capsys.readouterr().out
+
     evaluate = _load_cli(repo, "evaluate")
     out = tmp_path / "eval"
     assert evaluate(["--workdir", str(tiny_run), "--out", str(out), "--seeds", "0,1,2", "--k", "3",
-                     "--search-steps", "3", "--max-curves", "1", "--shapes", "line"]) == 0
+                     "--search-steps", "3", "--max-curves", "1", "--shapes", "line", "--realism-curves", "4"]) == 0
     report = json.loads((out / "report.json").read_text())
     h, r = report["header"], report["results"]
     assert h["evaluator_checksum"] == ev.checksum and h["checkpoint_step"] == 4
@@ -240,6 +244,27 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     md = (out / "report.md").read_text()
     assert ev.checksum in md and "| style accuracy top-1 (evaluator) |" in md
     assert "| support: frames with a toe within the contact height of the floor |" in md and "D's input" in md
+    # realism, like for like: four held-out paths, both evaluators, every style swept over the speeds
+    z = r["realism"]
+    assert h["speed_free_evaluator_checksum"] == sf.checksum and z["speed_free_evaluator"]["checksum"] == sf.checksum
+    assert z["paths"] == 4 and set(z["real_reference"]["tests"]) == {"posture", "gait", "speed", "all", "evaluator"}
+    for key in ("two_sample_gait", "two_sample_posture", "two_sample_all", "sra_top1_own_speed",
+                "sra_top1_speed_free_own_speed", "sra_top1_speed_free_default_speed", "stride_speed_slope"):
+        assert len(gen[key]["per_seed"]) == 3, key
+    for g in ("gait", "posture", "speed", "all", "evaluator"):
+        assert 0.0 <= r["real"][f"two_sample_{g}"] <= 1.0 and 0.0 <= gen[f"two_sample_{g}"]["mean"] <= 1.0
+    styled = [v for v in r["per_style"].values() if "own_step_frequency_hz" in v["generated"]]
+    assert len(styled) == len(r["per_style"])
+    assert all(len(v["generated"]["step_frequency_hz@1.3"]["per_seed"]) == 3 for v in styled)
+    # the real held-out clips' strides: counted gait cycles agree with the spectrum's distance per cycle
+    clips = z["stride_clips"]
+    assert len(clips) == len(h["val_files"])
+    ratio = [c["counted_stride_m"] / c["distance_per_cycle_m"] for c in clips]
+    assert np.median(ratio) == pytest.approx(1.0, abs=0.03)
+    real_freq = [v["real"]["own_step_frequency_hz"] for v in r["per_style"].values()
+                 if v["real"].get("own_step_frequency_hz") is not None]
+    assert len(real_freq) == 4 and all(0.5 < f < 1.4 for f in real_freq)
+    assert "## Realism, like for like" in md and "Features that separate most" in md
 
 
 def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
@@ -251,6 +276,11 @@ def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
     assert "no checkpoints" in capsys.readouterr().err
     assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"), "--seeds", "a,b"]) == 2
     assert "--seeds" in capsys.readouterr().err
+    assert evaluate(["--out", str(tmp_path / "o")]) == 2  # the shipped model: no run to find an evaluator in
+    assert "needs --evaluator" in capsys.readouterr().err
+    assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"),
+                     "--speed-free-evaluator", str(tiny_run / "evaluator.npz")]) == 2
+    assert "not a speed-free evaluator" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
