@@ -43,7 +43,9 @@ def test_body_joints_of_both_skeletons(cmu_layout):
         "LeftToeBase", "RightToeBase", "LeftFoot", "RightFoot", "LeftLeg", "RightLeg", "LeftUpLeg", "RightUpLeg"]
     assert [names[i] for i in b.hands] == ["LeftHand", "RightHand"] and names[b.head] == "Head"
     rest = representation.rest_positions(cmu_layout)
-    assert b.leg_m == pytest.approx(rest[b.hips[0], 1] - rest[b.toes[0], 1])
+    thigh = np.linalg.norm(rest[b.hips[0]] - rest[b.knees[0]])
+    shank = np.linalg.norm(rest[b.knees[0]] - rest[b.ankles[0]])
+    assert b.leg_m == pytest.approx(thigh + shank) and 0.7 < b.leg_m < 1.0
     bandai = representation.layout_from_parents(
         ("Hips", "UpperLeg_L", "LowerLeg_L", "Foot_L", "Toes_L", "UpperLeg_R", "LowerLeg_R", "Foot_R", "Toes_R",
          "Spine", "Head", "Hand_L", "Hand_R"), (-1, 0, 1, 2, 3, 0, 5, 6, 7, 0, 9, 9, 9), np.ones(12) * 0.3,
@@ -51,7 +53,11 @@ def test_body_joints_of_both_skeletons(cmu_layout):
                   [0, -0.4, 0], [0, -0.4, 0], [0, -0.05, 0.1], [0, 0.3, 0], [0, 0.3, 0], [0.3, 0, 0], [-0.3, 0, 0]]))
     bb = realism.body(bandai)
     assert (bb.toes, bb.ankles, bb.knees, bb.hips, bb.hands, bb.head) == ((4, 8), (3, 7), (2, 6), (1, 5), (11, 12), 10)
-    assert bb.leg_m == pytest.approx(0.85)
+    assert bb.leg_m == pytest.approx(0.8)
+    # Bandai's BVH offsets lie along x, not y: the leg length does not depend on the rest pose's direction
+    turned = bandai.__class__(**{**bandai.__dict__, "rest_offsets_m": tuple(
+        (-y, x, z) for x, y, z in np.asarray(bandai.rest_offsets_m).tolist())})
+    assert realism.body(turned).leg_m == pytest.approx(0.8)
 
 
 def test_cycle_frequency_of_short_sines():

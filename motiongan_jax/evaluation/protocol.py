@@ -284,7 +284,7 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
     if ctx.realism_curves:
         log(f"realism: {len(ctx.realism_curves)} held-out paths, real windows")
         realism_real = own_paths.real_block(ctx)
-        ref = realism_real["reference"]["tests"]
+        ref = (realism_real["reference"] or {}).get("tests", {})
         real_row.update({f"two_sample_{g}": ref[g]["accuracy"] for g in ref})
         real_row["sra_top1_own_speed"] = realism_real["sra"]
         real_row["sra_top1_speed_free_own_speed"] = realism_real["sra_speed_free"]

@@ -53,13 +53,14 @@ class Body:
     hips: tuple[int, int]
     hands: tuple[int, int]
     head: int
-    leg_m: float  # rest height of the hip joints above the toes
+    leg_m: float  # thigh + shank, metres
     joint_names: tuple[str, ...]
 
 
 def body(layout) -> Body:
     """The toes (representation.foot_joints) and, up their parent chain, the ankles, knees and
-    hip joints; the hands and head by name. RealismError if any is missing."""
+    hip joints; the hands and head by name; the leg length (hip to knee to ankle, mean of the two
+    legs). RealismError if any is missing."""
     names = layout.joint_names
     parents = layout.parents
     toes = foot_joints(layout)
@@ -79,10 +80,12 @@ def body(layout) -> Body:
     head = named("head")
     if None in hands or head is None:
         raise RealismError(f"cannot find both hands and the head among {list(names)}")
+    # thigh + shank: distances in the rest pose, whichever way its offsets point (Bandai's lie along x)
     rest = rest_positions(layout)
-    leg = float(np.mean([rest[h, 1] - rest[t, 1] for h, t in zip(hips, toes)]))
+    leg = float(np.mean([np.linalg.norm(rest[h] - rest[k]) + np.linalg.norm(rest[k] - rest[a])
+                         for h, k, a in zip(hips, knees, ankles)]))
     if not leg > 0:
-        raise RealismError("the rest pose's hips are not above its toes")
+        raise RealismError("the rest pose's legs have no length")
     return Body(toes, ankles, knees, hips, hands, head, leg, tuple(names))
 
 

@@ -139,19 +139,20 @@ def realism_markdown(r: dict, h: dict) -> list[str]:
     z = r.get("realism") or {}
     if not z:
         return []
-    first, ref = z.get("generated_tests_first_seed") or {}, z["real_reference"]
+    first, ref = z.get("generated_tests_first_seed") or {}, (z["real_reference"] or {}).get("tests", {})
     sf = z.get("speed_free_evaluator")
     lines = ["", "## Realism, like for like", "",
              f"{z['paths']} held-out paths ({z['real_windows']} real windows), each walked in its clip's style at "
              f"its speed (K draws per seed) and cut into the same windows. Two-sample test: logistic regression, "
              f"real against generated, {FOLDS}-fold by path; balanced accuracy, 0.5 = indistinguishable. Real: "
-             "the real windows in two halves by path, tested the same way.",
+             "the real windows in two halves by path, tested the same way (styles with two or more paths; "
+             "none when fewer than 4 such paths).",
              "- speed-free evaluator: " + ("none given" if not sf else
                                           f"checksum `{sf['checksum']}`, real held-out top-1 "
                                           f"{_fmt((sf.get('real_heldout') or {}).get('top1'))}"), "",
              "| features (count) | generated vs real (first seed) | real vs real |", "|---|---|---|"]
     for g, v in (first.get("tests") or {}).items():
-        lines.append(f"| {g} ({v['features']}) | {_fmt(v['accuracy'])} | {_fmt(ref['tests'][g]['accuracy'])} |")
+        lines.append(f"| {g} ({v['features']}) | {_fmt(v['accuracy'])} | {_fmt(ref.get(g, {}).get('accuracy'))} |")
     if first:
         lines += ["", "Features that separate most (first seed; d: generated − real mean in real standard "
                       "deviations; accuracy of that feature alone):", "",
