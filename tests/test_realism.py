@@ -163,3 +163,22 @@ def test_realism_tests_by_group_and_real_halves():
     styles = np.array([0, 0, 0, 0, 1, 1, 1, 1])
     half = realism.split_halves(paths, styles)
     assert list(half) == [1, 1, 0, 0, 0, 0, 0, 1]
+
+
+def test_real_reference_keeps_styles_with_two_paths():
+    """The real-against-real reference: real windows of one distribution, split by path, test at
+    chance; a style held by one path only is left out (it would sit in one half)."""
+    from motiongan_jax.evaluation import own_paths
+
+    k_x, k_e = jax.random.split(jax.random.key(11))
+    paths = np.repeat(np.arange(17), 10)
+    labels = np.where(paths < 8, 0, np.where(paths < 16, 1, 2))  # styles 0 and 1: 8 paths each; style 2: one
+    X = np.asarray(jax.random.normal(k_x, (170, 5)))
+    E = np.asarray(jax.random.normal(k_e, (170, 3)))
+    names = ["a.x", "a.y", "cadence_steps_per_s", "stride_leg", "speed_mps"]
+    kinds = ["posture", "posture", "gait", "gait", "speed"]
+    ref = own_paths._reference(X, E, names, kinds, paths, labels)
+    t = ref["tests"]
+    assert t["all"]["n_real"] + t["all"]["n_gen"] == 160 and t["all"]["paths"] == 16
+    assert all(abs(v["accuracy"] - 0.5) < 0.2 for v in t.values())
+    assert own_paths._reference(X[:30], E[:30], names, kinds, paths[:30], labels[:30]) is None  # 3 paths
