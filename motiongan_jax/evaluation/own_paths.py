@@ -217,8 +217,10 @@ def default_speed_block(ctx, seed: int) -> dict:
     wins, labels = [], []
     resampled = [user_curves.prepare_curve(c.curve_Lx3[:, [0, 2]].astype(np.float64), ctx.sample_rate,
                                            user_curves.DEFAULT_SPEED_M_PER_S) for c in ctx.realism_curves]
-    # one length for all (whole windows of the shortest long enough): G compiles once per length
+    # one length for all (whole windows of the shortest long enough, at most the sweep's): G
+    # compiles once per length, and the sweep's C walks of that length share the compilation
     n = min((len(c) // T * T for c in resampled if len(c) >= T), default=0)
+    n = min(n, sweep_samples(ctx))
     for ci, curve in enumerate(resampled):
         if n == 0 or len(curve) < n:
             continue
@@ -239,6 +241,12 @@ def default_speed_block(ctx, seed: int) -> dict:
             "sra_speed_free_default_speed": sf_top1, "sra_speed_free_default_speed_per_style": sf_per}
 
 
+def sweep_samples(ctx) -> int:
+    """Samples of each walk of the stride-speed sweep: STRIDE_SECONDS in whole windows."""
+    T = ctx.cfg.data.window_T
+    return max(int(np.ceil(STRIDE_SECONDS * ctx.sample_rate / T)), 1) * T
+
+
 def stride_speed_block(ctx, seed: int) -> dict:
     """One seed: every style (one draw) on a straight line at each of STRIDE_SPEEDS; step
     frequency (Hz) per style and speed, and per style the slope of frequency on speed over the
@@ -251,8 +259,11 @@ def stride_speed_block(ctx, seed: int) -> dict:
     w = np.asarray(styles.latent_codes(ctx.state, np.arange(C, dtype=np.int32), z))
     phase = _phases(ctx, k_p, C)  # one draw per style, walked at every speed
     freq = np.full((C, len(STRIDE_SPEEDS)), np.nan)
+    m = sweep_samples(ctx)
     for si, v in enumerate(STRIDE_SPEEDS):
-        line = user_curves.prepare_curve(user_curves.load_curve("line", length=v * STRIDE_SECONDS), ctx.sample_rate, v)
+        # a little longer than needed, then cut: every speed walks the same samples (one compilation)
+        line = user_curves.prepare_curve(user_curves.load_curve("line", length=v * (m + 2) / ctx.sample_rate),
+                                         ctx.sample_rate, v)[:m]
         gen = walk.generate_motion(ctx.state, ctx.layout, from_origin(line), w, phase)
         for c in range(C):
             freq[c, si] = metrics.step_frequency_hz(metrics.toe_heights(gen.positions[c][:, list(ctx.feet)]),
