@@ -6,6 +6,7 @@ an evaluator trained for a few steps) and check the report's structure and the r
 whose values are known: real motion on its own curve has bone error ~0 and path ratio ~1.
 """
 
+import dataclasses
 import json
 import shutil
 
@@ -77,6 +78,34 @@ def test_evaluator_learns_is_deterministic_and_round_trips(tmp_path):
 
     other = evaluator.train(sample, 6, ("a", "b", "c"), ecfg.__class__(**{**ecfg.__dict__, "seed": 1}))
     assert other.checksum != ev.checksum
+
+
+def test_speed_free_evaluator_reads_poses_not_their_order(tmp_path):
+    """The speed-free variant scores a window and the same window with its frames shuffled (or
+    played at another rate: each frame twice) alike; the temporal evaluator does not. It still
+    learns the toy styles, and its kind survives saving."""
+    sample = _toy_sampler()
+    ecfg = evaluator.EvaluatorConfig(channels=(8, 8, 8), steps=60, batch_size=32, lr=3e-3, speed_free=True)
+    ev = evaluator.train(sample, 6, ("a", "b", "c"), ecfg)
+    test = sample(jax.random.key(99), 0)
+    root, pose = np.asarray(test["root_BxTx3"]), np.asarray(test["pose_BxTxR"])
+    logits, _ = evaluator.classify(ev, root, pose)
+    assert np.mean(np.argmax(logits, -1) == np.asarray(test["label_B"])) > 0.9
+    perm = np.asarray(jax.random.permutation(jax.random.key(3), 16))
+    shuffled, _ = evaluator.classify(ev, root, pose[:, perm])
+    np.testing.assert_allclose(shuffled, logits, atol=1e-4)
+    half = np.repeat(pose[:, :8], 2, axis=1)  # the first half of each window, each pose held twice
+    slow, _ = evaluator.classify(ev, root, half)
+    fast, _ = evaluator.classify(ev, root, np.concatenate([pose[:, :8], pose[:, :8]], 1))
+    np.testing.assert_allclose(slow, fast, atol=1e-4)
+    temporal = evaluator.train(sample, 6, ("a", "b", "c"), dataclasses.replace(ecfg, speed_free=False))
+    a, _ = evaluator.classify(temporal, root, pose)
+    b, _ = evaluator.classify(temporal, root, pose[:, perm])
+    assert np.max(np.abs(a - b)) > 1e-3
+    npz, _ = evaluator.save(ev, tmp_path / "sf.npz")
+    loaded = evaluator.load(npz)
+    assert loaded.meta["config"]["speed_free"] is True and loaded.checksum == ev.checksum
+    np.testing.assert_array_equal(evaluator.classify(loaded, root, pose)[0], logits)
 
 
 def test_evaluator_load_rejects_damage_and_missing_files(tmp_path):
@@ -169,10 +198,14 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     ev = evaluator.load(tiny_run / "evaluator.npz")
     assert ev.meta["real_heldout"]["windows"] > 0
 
+    assert train_ev(["--workdir", str(tiny_run), "--steps", "5", "--speed-free"]) == 0
+    sf = evaluator.load(tiny_run / "evaluator_speed_free.npz")
+    assert sf.meta["config"]["speed_free"] and sf.checksum in capsys.readouterr().out
+
     evaluate = _load_cli(repo, "evaluate")
     out = tmp_path / "eval"
     assert evaluate(["--workdir", str(tiny_run), "--out", str(out), "--seeds", "0,1,2", "--k", "3",
-                     "--search-steps", "3", "--max-curves", "1", "--shapes", "line"]) == 0
+                     "--search-steps", "3", "--max-curves", "1", "--shapes", "line", "--realism-curves", "4"]) == 0
     report = json.loads((out / "report.json").read_text())
     h, r = report["header"], report["results"]
     assert h["evaluator_checksum"] == ev.checksum and h["checkpoint_step"] == 4
@@ -211,6 +244,30 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     md = (out / "report.md").read_text()
     assert ev.checksum in md and "| style accuracy top-1 (evaluator) |" in md
     assert "| support: frames with a toe within the contact height of the floor |" in md and "D's input" in md
+    # realism, like for like: four held-out paths, both evaluators, every style swept over the speeds
+    z = r["realism"]
+    assert h["speed_free_evaluator_checksum"] == sf.checksum and z["speed_free_evaluator"]["checksum"] == sf.checksum
+    assert z["paths"] == 4 and set(z["generated_tests_first_seed"]["tests"]) == {
+        "posture", "gait", "speed", "all", "evaluator"}
+    # one held-out clip per style: halves by path would hold different styles, so no real reference
+    assert z["real_reference"] is None and "two_sample_gait" not in r["real"]
+    for key in ("two_sample_gait", "two_sample_posture", "two_sample_all", "sra_top1_own_speed",
+                "sra_top1_speed_free_own_speed", "sra_top1_speed_free_default_speed", "stride_speed_slope"):
+        assert len(gen[key]["per_seed"]) == 3, key
+    for g in ("gait", "posture", "speed", "all", "evaluator"):
+        assert 0.0 <= gen[f"two_sample_{g}"]["mean"] <= 1.0
+    styled = [v for v in r["per_style"].values() if "own_step_frequency_hz" in v["generated"]]
+    assert len(styled) == len(r["per_style"])
+    assert all(len(v["generated"]["step_frequency_hz@1.3"]["per_seed"]) == 3 for v in styled)
+    # the real held-out clips' strides: counted gait cycles agree with the spectrum's distance per cycle
+    clips = z["stride_clips"]
+    assert len(clips) == len(h["val_files"])
+    ratio = [c["counted_stride_m"] / c["distance_per_cycle_m"] for c in clips]
+    assert np.median(ratio) == pytest.approx(1.0, abs=0.03)
+    real_freq = [v["real"]["own_step_frequency_hz"] for v in r["per_style"].values()
+                 if v["real"].get("own_step_frequency_hz") is not None]
+    assert len(real_freq) == 4 and all(0.5 < f < 1.4 for f in real_freq)
+    assert "## Realism, like for like" in md and "Features that separate most" in md
 
 
 def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
@@ -222,6 +279,11 @@ def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
     assert "no checkpoints" in capsys.readouterr().err
     assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"), "--seeds", "a,b"]) == 2
     assert "--seeds" in capsys.readouterr().err
+    assert evaluate(["--out", str(tmp_path / "o")]) == 2  # the shipped model: no run to find an evaluator in
+    assert "needs --evaluator" in capsys.readouterr().err
+    assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"),
+                     "--speed-free-evaluator", str(tiny_run / "evaluator.npz")]) == 2
+    assert "not a speed-free evaluator" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 

@@ -391,6 +391,41 @@ def test_step_frequency_of_sinusoidal_steps(cycle_hz, fps, seconds):
     assert math.isnan(gait.step_frequency_hz(h[: int(2.4 * fps)], fps))
 
 
+@pytest.mark.parametrize("cycle_hz, speed", [(0.9, 1.2), (1.1, 0.7)])
+def test_stride_of_a_walk_at_known_speed_and_rate(cycle_hz, speed):
+    # 10 s at 30 fps along a 40° heading, toes lifting in turn at cycle_hz: each cycle walks
+    # speed / cycle_hz metres, by the spectrum and by counting alike
+    fps = 30.0
+    t = np.arange(300) / fps
+    root = _rotate_y(_line(300, speed / fps), 0.7)
+    s = np.sin(2 * np.pi * cycle_hz * t + 0.4)
+    h = np.stack([0.08 * np.maximum(s, 0), 0.08 * np.maximum(-s, 0)], -1)
+    assert gait.walking_speed_mps(root, fps) == pytest.approx(speed, rel=1e-9)
+    assert gait.distance_per_cycle_m(root, h, fps) == pytest.approx(speed / cycle_hz, rel=0.02)
+    c = gait.counted_gait_cycles(root, h, fps)
+    # half-cycles between the first and last sign change of s (one at an edge may go uncounted)
+    n_cross = np.sum(np.diff(np.sign(s)) != 0)
+    assert c["cycles"] in ((n_cross - 1) / 2, (n_cross - 2) / 2)
+    assert c["stride_m"] == pytest.approx(speed / cycle_hz, rel=0.02)
+    assert c["frequency_hz"] == pytest.approx(cycle_hz, rel=0.02)
+    assert c["distance_m"] == pytest.approx(c["cycles"] * speed / cycle_hz, rel=0.02)
+    assert math.isnan(gait.counted_gait_cycles(root, np.zeros((300, 2)) + 0.01, fps)["stride_m"])
+
+
+def test_linear_fit_pooled_and_within_groups():
+    x = np.array([0.6, 1.0, 1.4, 0.6, 1.0, 1.4])
+    y = np.array([0.7, 0.9, 1.1, 1.2, 1.4, 1.6])  # two groups, slope 0.5 each, levels 0.4 and 0.9
+    g = np.array([0, 0, 0, 1, 1, 1])
+    fit = M.linear_fit(x, y)
+    assert fit["slope"] == pytest.approx(0.5) and fit["intercept"] == pytest.approx(0.65) and fit["n"] == 6
+    assert M.linear_fit(x, y, g)["slope"] == pytest.approx(0.5)
+    # the groups' levels tilt a pooled fit when their speeds differ, not the slope within them
+    x2 = np.array([0.6, 0.8, 1.0, 1.2, 1.4, 1.6])
+    y2 = 0.5 * x2 + np.where(g == 0, 0.9, 0.1)
+    assert M.linear_fit(x2, y2)["slope"] < 0 and M.linear_fit(x2, y2, g)["slope"] == pytest.approx(0.5)
+    assert math.isnan(M.linear_fit(np.ones(4), np.arange(4.0))["slope"])
+
+
 # ---------------------------------------------------------------------------------------------
 # Skeleton validity, smoothness
 

@@ -2,12 +2,18 @@
 
   python bin/evaluate.py --workdir runs/small --out runs/small/eval
                          [--data DATA_DIR] [--evaluator runs/small/evaluator.npz]
+                         [--speed-free-evaluator runs/small/evaluator_speed_free.npz]
                          [--cmu-curves DATA_DIR/cmu] [--seeds 0,1,2] [--k 3] [--step N]
+  python bin/evaluate.py [--model FILE.npz] --evaluator EV.npz --out OUT   # an export (default: the shipped model)
 
 Generates for every (unseen curve × style) with K noise draws and each seed; unseen curves are
 the run's held-out real root paths (straight and turning), the root paths of the BVH files in
 --cmu-curves (another lab: only their floor path is used), and the synthetic shapes. Scores
 generated and real held-out data side by side with the evaluator (bin/train_evaluator.py).
+Realism, like for like: every held-out path walked in its clip's style at its speed against the
+clip (a classifier two-sample test per feature group, stride frequency, step height and skating
+per style), the stride-speed relation, and style accuracy by the speed-free evaluator
+(bin/train_evaluator.py --speed-free; WORKDIR/evaluator_speed_free.npz is used when it exists).
 Writes OUT/report.json, OUT/report.md, OUT/confusion.png and OUT/pca_w.png.
 """
 
@@ -15,28 +21,31 @@ import argparse
 import sys
 from pathlib import Path
 
-from motiongan_jax.cli import add_checkpoint_arguments
+from motiongan_jax.cli import add_model_arguments
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--workdir", required=True, help="a training run (its latest checkpoint)")
+    add_model_arguments(ap)
     ap.add_argument("--out", required=True, help="output directory")
     ap.add_argument("--data", default=None, help="the run's data directory (default: as trained)")
     ap.add_argument("--evaluator", default=None, help="evaluator .npz (default WORKDIR/evaluator.npz)")
+    ap.add_argument("--speed-free-evaluator", default=None,
+                    help="speed-free evaluator .npz (default WORKDIR/evaluator_speed_free.npz if it exists)")
     ap.add_argument("--cmu-curves", default=None, help="directory of BVH files whose root paths are used as curves")
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--k", type=int, default=3, help="noise draws per (curve, style), >= 3 in the protocol")
-    add_checkpoint_arguments(ap)
     ap.add_argument("--search-steps", type=int, default=200, help="style-search optimisation steps (0: skip)")
     ap.add_argument("--max-curves", type=int, default=12, help="held-out real curves at most")
+    ap.add_argument("--realism-curves", type=int, default=48,
+                    help="held-out paths walked like for like in the realism part, at most (0: skip it)")
     ap.add_argument("--shapes", default=",".join(("line", "circle", "s_curve", "figure8", "corner")),
                     help="synthetic curve shapes (comma-separated)")
     args = ap.parse_args(argv)
 
     from motiongan_jax.config import ConfigError
     from motiongan_jax.data import curves, file_labels
-    from motiongan_jax.evaluation import evaluator, protocol
+    from motiongan_jax.evaluation import evaluator, protocol, realism
     from motiongan_jax.evaluation import report as eval_report
     from motiongan_jax.generate import limits
     from motiongan_jax.motion.bvh import BVHError
@@ -54,12 +63,14 @@ def main(argv=None) -> int:
         if bad:
             raise ConfigError(f"--shapes: unknown shape(s) {bad}; known: {', '.join(curves.SHAPES)}")
         settings = protocol.Settings(seeds=seeds, k=args.k, max_heldout_curves=args.max_curves,
-                                       search_steps=args.search_steps, search_clips=1 if args.search_steps > 0 else 0)
+                                       search_steps=args.search_steps, search_clips=1 if args.search_steps > 0 else 0,
+                                       realism_max_curves=args.realism_curves)
         report, ctx = protocol.evaluate_run(args.workdir, settings, shapes, step=args.step, params=args.params,
                                               data_dir=args.data, evaluator_path=args.evaluator,
-                                              cmu_curves=args.cmu_curves)
+                                              cmu_curves=args.cmu_curves,
+                                              speed_free_evaluator_path=args.speed_free_evaluator, model=args.model)
     except (ConfigError, file_labels.DataError, BVHError, checkpoint.CheckpointError, evaluator.EvaluatorError,
-            protocol.EvaluationError, limits.GenerateError) as err:
+            protocol.EvaluationError, limits.GenerateError, realism.RealismError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
 

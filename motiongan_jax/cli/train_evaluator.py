@@ -3,11 +3,13 @@
   python bin/train_evaluator.py --config configs/small.py --out runs/small/evaluator.npz
                                 [--data DATA_DIR] [--set field=value ...] [--steps N] [--seed N]
   python bin/train_evaluator.py --workdir runs/small            # the run's config and data
+  python bin/train_evaluator.py --workdir runs/small --speed-free   # -> runs/small/evaluator_speed_free.npz
 
 Uses the config's data settings and training split (the validation split is held out), with the
 training sampler's FPS augmentation. Writes OUT (.npz) and OUT with .json (meta and the weights'
 SHA-256 checksum), and prints the accuracy on real held-out windows: the ceiling for generated
-motion.
+motion. --speed-free trains the variant that scores each frame's pose alone (evaluation/evaluator.py):
+no travel speed, cadence or joint speed among what it reads.
 """
 
 import argparse
@@ -27,6 +29,8 @@ def main(argv=None) -> int:
                     help="override config fields (repeatable)")
     ap.add_argument("--steps", type=int, default=None, help="evaluator training steps (default 1500)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--speed-free", action="store_true",
+                    help="the speed-free variant (per-frame poses; default out WORKDIR/evaluator_speed_free.npz)")
     args = ap.parse_args(argv)
 
     import dataclasses
@@ -54,10 +58,12 @@ def main(argv=None) -> int:
             cfg = load_config(args.config, check=False)
         sets = list(args.set) + ([f"data.data_dir={args.data}"] if args.data else [])
         cfg = validate(override(cfg, sets))
-        out = Path(args.out) if args.out else (Path(args.workdir) / "evaluator.npz" if args.workdir else None)
+        default = "evaluator_speed_free.npz" if args.speed_free else "evaluator.npz"
+        out = Path(args.out) if args.out else (Path(args.workdir) / default if args.workdir else None)
         if out is None:
             raise ConfigError("--out is required with --config")
-        ecfg = evaluator.EvaluatorConfig(seed=args.seed, **({"steps": args.steps} if args.steps else {}))
+        ecfg = evaluator.EvaluatorConfig(seed=args.seed, speed_free=args.speed_free,
+                                         **({"steps": args.steps} if args.steps else {}))
         if ecfg.steps < 1:
             raise ConfigError("--steps must be positive")
 

@@ -13,6 +13,13 @@ and statistics; loading recomputes and compares it.
     conv k, stride 2, 128 -> 128, LeakyReLU     T/4
     mean over time -> features (128)            (FMD, diversity, multimodality use these)
     dense 128 -> C                               logits
+
+The speed-free variant (`EvaluatorConfig.speed_free`, bin/train_evaluator.py --speed-free) has
+the same layers with kernel 1 and stride 1: each frame's pose is scored alone and the window's
+features are the mean over its frames. It sees which poses a walk passes through, not how fast:
+no travel speed (the root enters only through the heading), no cadence and no joint speed can be
+read off an unordered set of root-relative poses. A generator that follows a curve cannot choose
+its speed, so this one does not credit a style for the speed the curve dictates.
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ class EvaluatorConfig:
     batch_size: int = 64
     lr: float = 1e-3
     seed: int = 0
+    speed_free: bool = False  # per-frame poses, averaged: no time order (module doc)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -70,10 +78,10 @@ def canonical_pose(root_NxTx3: jax.Array, pose_NxTxR: jax.Array) -> jax.Array:
 class StyleClassifier(nnx.Module):
     def __init__(self, num_rows: int, num_styles: int, cfg: EvaluatorConfig, *, rngs: nnx.Rngs):
         c1, c2, c3 = cfg.channels
-        k = cfg.kernel
+        k, s = (1, 1) if cfg.speed_free else (cfg.kernel, 2)
         self.conv1 = nnx.Conv(num_rows, c1, (k,), padding="SAME", rngs=rngs)
-        self.conv2 = nnx.Conv(c1, c2, (k,), strides=(2,), padding="SAME", rngs=rngs)
-        self.conv3 = nnx.Conv(c2, c3, (k,), strides=(2,), padding="SAME", rngs=rngs)
+        self.conv2 = nnx.Conv(c1, c2, (k,), strides=(s,), padding="SAME", rngs=rngs)
+        self.conv3 = nnx.Conv(c2, c3, (k,), strides=(s,), padding="SAME", rngs=rngs)
         self.head = nnx.Linear(c3, num_styles, rngs=rngs)
 
     def features(self, x_NxTxR: jax.Array) -> jax.Array:

@@ -310,6 +310,36 @@ def mean_jerk(joints_TxJx3, fps: float) -> float:
 
 
 # ---------------------------------------------------------------------------------------------
+# 8. Gait against speed (the measures themselves: motion.gait)
+
+
+def linear_fit(x_N, y_N, groups_N=None) -> dict:
+    """Least-squares line y = a + b·x: {"slope": b, "intercept": a (nan with groups), "n"}. With
+    `groups_N`, one intercept per group and a common slope (the slope within groups, e.g. within
+    styles: a style's own level does not tilt it). nan slope when x does not vary (within groups)."""
+    x = arrays.float_array(x_N, "x_N", 1)
+    y = arrays.float_array(y_N, "y_N", 1)
+    arrays.same_len(x, "x_N", y, "y_N")
+    if groups_N is None:
+        xc, yc = x - x.mean(), y - y.mean()
+    else:
+        g = np.asarray(groups_N)
+        if g.shape != x.shape:
+            raise ValueError(f"groups_N: shape {g.shape} does not match x_N {x.shape}")
+        xc, yc = x.copy(), y.copy()
+        for k in np.unique(g):
+            m = g == k
+            xc[m] -= x[m].mean()
+            yc[m] -= y[m].mean()
+    sxx = float(np.sum(xc * xc))
+    if sxx <= 1e-12 * max(float(np.sum(x * x)), 1e-300):
+        return {"slope": float("nan"), "intercept": float("nan"), "n": int(len(x))}
+    b = float(np.sum(xc * yc) / sxx)
+    a = float(y.mean() - b * x.mean()) if groups_N is None else float("nan")
+    return {"slope": b, "intercept": a, "n": int(len(x))}
+
+
+# ---------------------------------------------------------------------------------------------
 # 9-10. Style space
 
 

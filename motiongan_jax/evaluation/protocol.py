@@ -24,7 +24,7 @@ from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.analysis import style_space
 from motiongan_jax.config import ConfigError, config_hash
 from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
-from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics
+from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics, own_paths
 from motiongan_jax.evaluation.eval_curves import (
     EvalCurve,
     file_curves,
@@ -37,7 +37,7 @@ from motiongan_jax.evaluation.eval_curves import (
 from motiongan_jax.generate import styles, walk
 from motiongan_jax.model import apply as model_apply
 from motiongan_jax.motion.representation import foot_joints, from_rows
-from motiongan_jax.train import checkpoint
+from motiongan_jax.train import checkpoint, pretrained
 
 
 class EvaluationError(ValueError):
@@ -56,6 +56,8 @@ class Settings:
     search_clips: int = 1  # per style
     search_steps: int = 200
     w_samples: int = 10
+    realism_windows: int = 8  # like-for-like walks (own_paths.py): each held-out path up to this many windows
+    realism_max_curves: int = 48
 
 
 @dataclasses.dataclass
@@ -74,6 +76,8 @@ class Context:
     contact_height_m: float  # calibrated on the real training clips (gait_stats.contact_height)
     long_curve: EvalCurve | None = None  # tens of metres: does the walk drift?
     probe_batch: dict | None = None  # real training windows from the run's sampler, for discriminator_probe
+    ev_speed_free: evaluator.Evaluator | None = None  # the speed-free evaluator, if one is given
+    realism_curves: list[EvalCurve] = dataclasses.field(default_factory=list)  # own_paths.curves_of
 
 
 def _real_block(ctx: Context) -> dict:
@@ -277,6 +281,23 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
                 [r for src, r in real["clips"].items() if r["style"] == name and src in curve_sources],
                 "step_frequency_hz")}
 
+    realism_real = None
+    if ctx.realism_curves:
+        log(f"realism: {len(ctx.realism_curves)} held-out paths, real windows")
+        realism_real = own_paths.real_block(ctx)
+        ref = (realism_real["reference"] or {}).get("tests", {})
+        real_row.update({f"two_sample_{g}": ref[g]["accuracy"] for g in ref})
+        real_row["sra_top1_own_speed"] = realism_real["sra"]
+        real_row["sra_top1_speed_free_own_speed"] = realism_real["sra_speed_free"]
+        real_row["stride_speed_slope"] = realism_real["real_slope_within_styles"]
+        real_style = own_paths.style_rows(realism_real["per_clip"], C)
+        for c in range(C):
+            name = ctx.style_names[c]
+            real_per_style[name].update(real_style[c])
+            real_per_style[name]["sra_top1_speed_free_own_speed"] = float(realism_real["sra_speed_free_per_style"][c])
+            real_per_style[name]["stride_speed_slope"] = realism_real["real_slope_per_style"][c]["slope"]
+    realism_seeds = []
+
     per_seed, per_seed_style, confusions = [], [], []
     for seed in s.seeds:
         log(f"seed {seed}: generating {len(ctx.curves_)} curves x {C} styles x {s.k} draws")
@@ -298,6 +319,21 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
             row.update(_long_curve_block(ctx, seed))
         log(f"seed {seed}: style space")
         row.update(_style_space_block(ctx, seed))
+        if realism_real is not None:
+            log(f"seed {seed}: realism (own paths, own styles, own speeds; default speed; stride-speed sweep)")
+            rg = own_paths.generated_block(ctx, seed, realism_real)
+            rd = own_paths.default_speed_block(ctx, seed)
+            rs = own_paths.stride_speed_block(ctx, seed)
+            row.update({f"two_sample_{g}": v["accuracy"] for g, v in rg["tests"]["tests"].items()})
+            nan = float("nan")
+            row.update({"sra_top1_own_speed": rg["sra_own_speed"],
+                        "sra_top1_speed_free_own_speed": rg["sra_speed_free_own_speed"],
+                        "sra_top1_default_speed": rd.get("sra_default_speed", nan),
+                        "sra_top1_speed_free_default_speed": rd.get("sra_speed_free_default_speed", nan),
+                        "stride_speed_slope": float(np.nanmean(rs["slope_C"])) if np.isfinite(rs["slope_C"]).any()
+                        else float("nan")})
+            realism_seeds.append({"seed": seed, "tests": rg["tests"], "style": own_paths.style_rows(rg["per_clip"], C),
+                                  "own": rg, "default": rd, "sweep": rs})
         per_seed.append(row)
         st = {}
         for c in range(C):
@@ -316,6 +352,8 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
                 "step_frequency_same_curve_hz": _mean_key(same, "step_frequency_hz")}
             st[name]["step_frequency_ratio"] = (st[name]["step_frequency_same_curve_hz"]
                                                 / real_per_style[name]["step_frequency_same_curve_hz"])
+            if realism_seeds:
+                st[name].update(_realism_style(realism_seeds[-1], c))
         per_seed_style.append(st)
     log("style search on held-out clips")
     search = _search_block(ctx)
@@ -333,6 +371,7 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
         "generated": generated,
         "real": real_row,
         "per_style": per_style,
+        "realism": _realism_summary(ctx, realism_real, realism_seeds),
         "search": search,
         "discriminator_probe": probe,
         "confusion_generated": np.sum(confusions, axis=0).tolist(),
@@ -344,6 +383,39 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
     }
 
 
+def _realism_style(r: dict, c: int) -> dict:
+    """One seed's like-for-like measures of style c (own_paths), flat for the per-style rows."""
+    out = dict(r["style"][c])
+    own, dflt, sweep = r["own"], r["default"], r["sweep"]
+    out["sra_top1_own_speed"] = float(own["sra_own_speed_per_style"][c])
+    out["sra_top1_speed_free_own_speed"] = float(own["sra_speed_free_own_speed_per_style"][c])
+    out["sra_top1_default_speed"] = float(dflt["sra_default_speed_per_style"][c]) if dflt else float("nan")
+    out["sra_top1_speed_free_default_speed"] = (float(dflt["sra_speed_free_default_speed_per_style"][c])
+                                                if dflt else float("nan"))
+    out["stride_speed_slope"] = float(sweep["slope_C"][c])
+    for si, v in enumerate(own_paths.STRIDE_SPEEDS):
+        out[f"step_frequency_hz@{v:g}"] = float(sweep["frequency_hz_CxS"][c, si])
+    return out
+
+
+def _realism_summary(ctx, real: dict | None, seeds: list[dict]) -> dict:
+    """What the report shows of the realism part beyond the mean ± CI rows: the first seed's
+    tests in detail (paths, folds, the features that separate most), the real reference's, the
+    stride measurements per held-out clip, and the sweep's speeds."""
+    if real is None:
+        return {}
+    first = seeds[0]["tests"] if seeds else None
+    return {"paths": len(ctx.realism_curves), "real_windows": int(len(real["labels"])),
+            "speeds_m_per_s": list(own_paths.STRIDE_SPEEDS), "fit_band_m_per_s": list(own_paths.FIT_BAND),
+            "real_slope_within_styles": real["real_slope_within_styles"],
+            "real_slope_across_styles": real["real_slope_across_styles"],
+            "generated_tests_first_seed": first, "real_reference": real["reference"],
+            "stride_clips": [{"style": ctx.style_names[r["style"]], **{k: v for k, v in r.items() if k != "style"}}
+                             for r in real["stride_clips"]],
+            "speed_free_evaluator": None if ctx.ev_speed_free is None else {
+                "checksum": ctx.ev_speed_free.checksum, "real_heldout": ctx.ev_speed_free.meta.get("real_heldout")}}
+
+
 def _ci(values) -> dict:
     vals = np.asarray(values, np.float64)
     if not np.isfinite(vals).any():
@@ -352,22 +424,9 @@ def _ci(values) -> dict:
     return {"mean": m, "ci95": h, "per_seed": vals.tolist()}
 
 
-def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: int | None = None,
-                 params: str = "ema", data_dir=None, evaluator_path=None, cmu_curves=None,
-                 log: Callable[[str], None] = print) -> tuple[dict, Context]:
-    """The protocol on the run `workdir` (its checkpoint `step`, G's `params`): loads the model, the
-    evaluator (default WORKDIR/evaluator.npz, which must match the run) and the run's data (or
-    `data_dir`), builds the unseen curves (held-out paths, the root paths of the BVH files in
-    `cmu_curves`, the synthetic `shapes`) and evaluates. Returns the report {"header", "results"}
-    and the context (for `write_report`). Raises ConfigError, DataError, BVHError,
-    CheckpointError, EvaluatorError, EvaluationError or GenerateError naming the problem."""
-    ckpt_step = checkpoint.resolve_step(workdir, step)
-    state, meta, cfg, layout = checkpoint.load_run(workdir, ckpt_step, params)
-    if data_dir is not None:
-        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=data_dir))
-    ev_path = Path(evaluator_path) if evaluator_path else Path(workdir) / "evaluator.npz"
+def _load_matching(ev_path, style_names, layout, cfg, source) -> evaluator.Evaluator:
+    """An evaluator that fits the model: its styles, skeleton and window length."""
     ev = evaluator.load(ev_path)
-    style_names = tuple(meta["style_names"])
     problems = []
     if tuple(ev.style_names) != style_names:
         problems.append(f"styles {list(ev.style_names)} vs the model's {list(style_names)}")
@@ -376,7 +435,47 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
     if ev.meta.get("window_T") != cfg.data.window_T:
         problems.append(f"window T {ev.meta.get('window_T')} vs {cfg.data.window_T}")
     if problems:
-        raise evaluator.EvaluatorError(f"{ev_path} does not match the run {workdir}: " + "; ".join(problems))
+        raise evaluator.EvaluatorError(f"{ev_path} does not match the run {source}: " + "; ".join(problems))
+    return ev
+
+
+def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: int | None = None,
+                 params: str = "ema", data_dir=None, evaluator_path=None, cmu_curves=None,
+                 speed_free_evaluator_path=None, model=None,
+                 log: Callable[[str], None] = print) -> tuple[dict, Context]:
+    """The protocol on the run `workdir` (its checkpoint `step`, G's `params`): loads the model, the
+    evaluator (default WORKDIR/evaluator.npz, which must match the run) and the run's data (or
+    `data_dir`), builds the unseen curves (held-out paths, the root paths of the BVH files in
+    `cmu_curves`, the synthetic `shapes`) and evaluates. Returns the report {"header", "results"}
+    and the context (for `write_report`). With `workdir` None, the export file `model` (default
+    the shipped model) is evaluated instead: it holds G alone, so the discriminator probe is
+    skipped, and `evaluator_path` must be given. The speed-free evaluator (default
+    WORKDIR/evaluator_speed_free.npz when that exists) adds its style accuracy to the realism part.
+    Raises ConfigError, DataError, BVHError, CheckpointError, EvaluatorError, EvaluationError or
+    GenerateError naming the problem."""
+    if workdir is None:
+        if not evaluator_path:
+            raise ConfigError("evaluating a model file needs --evaluator (there is no run to find one in)")
+        state, meta, cfg, layout = pretrained.load_model(None, step, params, model)
+        ckpt_step = int(state.step)
+        source = str(model or pretrained.SHIPPED_MODEL.name)
+    else:
+        ckpt_step = checkpoint.resolve_step(workdir, step)
+        state, meta, cfg, layout = checkpoint.load_run(workdir, ckpt_step, params)
+        source = str(workdir)
+    if data_dir is not None:
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=data_dir))
+    ev_path = Path(evaluator_path) if evaluator_path else Path(workdir) / "evaluator.npz"
+    style_names = tuple(meta["style_names"])
+    ev = _load_matching(ev_path, style_names, layout, cfg, source)
+    sf_path = (Path(speed_free_evaluator_path) if speed_free_evaluator_path
+               else (Path(workdir) / "evaluator_speed_free.npz" if workdir is not None else None))
+    ev_sf = None
+    if sf_path is not None and (speed_free_evaluator_path or sf_path.is_file()):
+        ev_sf = _load_matching(sf_path, style_names, layout, cfg, source)
+        if not ev_sf.meta["config"].get("speed_free"):
+            raise evaluator.EvaluatorError(f"{sf_path} is not a speed-free evaluator (bin/train_evaluator.py "
+                                           "--speed-free)")
     dataset = clip_cache.load_dataset(cfg.data)
     if tuple(dataset.style_names) != style_names:
         raise file_labels.DataError(f"the data's styles {list(dataset.style_names)} differ from the model's")
@@ -398,21 +497,24 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
     contact = gait_stats.contact_height(dataset.train, layout, feet)
     log(f"contact height {contact * 100:.1f} cm (calibrated on the training clips)")
     long_curve = long_line(rate, speed, settings.long_curve_m)
-    probe = jax.jit(sampling.make_sample_batch(cfg.data, d_probe.PROBE_WINDOWS))(
+    probe = None if workdir is None else jax.jit(sampling.make_sample_batch(cfg.data, d_probe.PROBE_WINDOWS))(
         sampling.build_arrays(dataset.train, dataset.style_names, cfg.data), jax.random.key(0), 0)
     ctx = Context(state, meta, cfg, layout, ev, style_names, dataset.val, rate, feet,
-                  eval_curves, settings, contact, long_curve, probe)
+                  eval_curves, settings, contact, long_curve, probe, ev_sf)
+    ctx.realism_curves = own_paths.curves_of(ctx)
     results = evaluate(ctx, log=log)
 
     counts = {}
     for c in eval_curves:
         counts[c.kind] = counts.get(c.kind, 0) + 1
     header = {
-        "workdir": str(workdir), "config_name": cfg.name, "config_hash": config_hash(cfg),
+        "workdir": source, "config_name": cfg.name, "config_hash": config_hash(cfg),
         "checkpoint_step": ckpt_step,
         "g_params": (f"moving average (train.g_ema_decay {cfg.train.g_ema_decay})"
                      if params == "ema" and cfg.train.g_ema_decay > 0 else "raw"),
         "evaluator": str(ev_path), "evaluator_checksum": ev.checksum,
+        "speed_free_evaluator": None if ev_sf is None else str(sf_path),
+        "speed_free_evaluator_checksum": None if ev_sf is None else ev_sf.checksum,
         "evaluator_real_heldout": ev.meta.get("real_heldout"), "style_names": list(style_names),
         "settings": dataclasses.asdict(settings), "curve_counts": counts,
         "curves": [{"name": c.name, "kind": c.kind, "samples": len(c.curve_Lx3), "source": c.source}

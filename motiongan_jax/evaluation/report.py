@@ -14,6 +14,7 @@ from motiongan_jax import atomic
 from motiongan_jax.analysis import style_space
 from motiongan_jax.evaluation import clip_metrics
 from motiongan_jax.evaluation.protocol import Context
+from motiongan_jax.evaluation.realism import FOLDS
 
 ROWS = [
     ("sra_top1", "style accuracy top-1 (evaluator)"),
@@ -46,6 +47,16 @@ ROWS = [
     ("pca_explained_2", "w PCA: variance explained by 2 components"),
     ("interp_monotonicity", "interpolation monotonicity (Spearman)"),
     ("arithmetic_agreement", "arithmetic A-B+C classified as A or C"),
+    ("sra_top1_own_speed", "realism: style top-1, held-out paths in their own style and speed (evaluator)"),
+    ("sra_top1_speed_free_own_speed", "realism: the same, by the speed-free evaluator"),
+    ("sra_top1_default_speed", "realism: style top-1, every style on the held-out paths at 1.2 m/s (evaluator)"),
+    ("sra_top1_speed_free_default_speed", "realism: the same, by the speed-free evaluator"),
+    ("two_sample_gait", "realism: two-sample accuracy, gait features (0.5 = indistinguishable; real: two halves)"),
+    ("two_sample_posture", "realism: two-sample accuracy, posture features"),
+    ("two_sample_speed", "realism: two-sample accuracy, speed features"),
+    ("two_sample_all", "realism: two-sample accuracy, all named features"),
+    ("two_sample_evaluator", "realism: two-sample accuracy, the evaluator's features"),
+    ("stride_speed_slope", "realism: step frequency vs speed, slope (Hz per m/s; mean of styles)"),
 ]
 
 
@@ -112,6 +123,7 @@ def markdown(report: dict) -> str:
                      f"{_fmt(g['step_frequency_same_curve_hz']['mean'])} | "
                      f"{_fmt(re_['step_frequency_same_curve_hz'])} | "
                      f"{_fmt(g['step_frequency_ratio']['mean'])} |")
+    lines += realism_markdown(r, h)
     if r.get("discriminator_probe"):
         lines += ["", "The trained D's verdict (mean P(real), share judged real) on real training windows and "
                       "on the same windows altered:", "", "| D's input | P(real) | judged real |", "|---|---|---|"]
@@ -119,6 +131,93 @@ def markdown(report: dict) -> str:
             lines.append(f"| {name} | {_fmt(v['p_real'])} | {_fmt(v['judged_real'])} |")
     lines += ["", "Plots: `confusion.png` (generated and real), `pca_w.png`.", ""]
     return "\n".join(lines)
+
+
+def realism_markdown(r: dict, h: dict) -> list[str]:
+    """The realism part's tables (own_paths.py): per feature group, the features that separate
+    most, per style, the stride-speed sweep and the stride measurements."""
+    z = r.get("realism") or {}
+    if not z:
+        return []
+    first, ref = z.get("generated_tests_first_seed") or {}, (z["real_reference"] or {}).get("tests", {})
+    sf = z.get("speed_free_evaluator")
+    lines = ["", "## Realism, like for like", "",
+             f"{z['paths']} held-out paths ({z['real_windows']} real windows), each walked in its clip's style at "
+             f"its speed (K draws per seed) and cut into the same windows. Two-sample test: logistic regression, "
+             f"real against generated, {FOLDS}-fold by path; balanced accuracy, 0.5 = indistinguishable. Real: "
+             "the real windows in two halves by path, tested the same way (styles with two or more paths; "
+             "none when fewer than 4 such paths).",
+             "- speed-free evaluator: " + ("none given" if not sf else
+                                          f"checksum `{sf['checksum']}`, real held-out top-1 "
+                                          f"{_fmt((sf.get('real_heldout') or {}).get('top1'))}"), "",
+             "| features (count) | generated vs real (first seed) | real vs real |", "|---|---|---|"]
+    for g, v in (first.get("tests") or {}).items():
+        lines.append(f"| {g} ({v['features']}) | {_fmt(v['accuracy'])} | {_fmt(ref.get(g, {}).get('accuracy'))} |")
+    if first:
+        lines += ["", "Features that separate most (first seed; d: generated − real mean in real standard "
+                      "deviations; accuracy of that feature alone):", "",
+                  "| feature | real | generated | d | accuracy alone |", "|---|---|---|---|---|"]
+        for e in first["top_features"]:
+            lines.append(f"| {e['feature']} | {_fmt(e['real'])} | {_fmt(e['generated'])} | {_fmt(e['d'])} | "
+                         f"{_fmt(e.get('accuracy'))} |")
+        lines += ["", "Largest standardised coefficients of the all-features model: "
+                  + ", ".join(f"{e['feature']} {e['coef']:+.2f}" for e in first["tests"]["all"]["top_coefficients"]),
+                  "", "Gait and speed features (first seed; lengths in leg lengths):", "",
+                  "| feature | real | generated | d |", "|---|---|---|---|"]
+        for name, e in first["gait_features"].items():
+            lines.append(f"| {name} | {_fmt(e['real'])} | {_fmt(e['generated'])} | {_fmt(e['d'])} |")
+    lines += ["", "Per style, on its own held-out paths at their speed (generated: mean over seeds; step height: "
+                  "std of left − right toe height; skating ratio at the contact height):", "",
+              "| style | step freq. gen (Hz) | real | ratio | step height gen (m) | real | skating gen | real | "
+              "lower toe gen (m) | real | top-1 own speed | speed-free own speed | real speed-free | "
+              "top-1 at 1.2 m/s | speed-free at 1.2 m/s |", "|" + "---|" * 15]
+    for name, v in r["per_style"].items():
+        g, re_ = v["generated"], v["real"]
+        if "own_step_frequency_hz" not in g:
+            continue
+        m = {k: g[k]["mean"] for k in g}
+        ratio = (m["own_step_frequency_hz"] / re_["own_step_frequency_hz"]
+                 if re_.get("own_step_frequency_hz") else float("nan"))
+        lines.append(f"| {name} | {_fmt(m['own_step_frequency_hz'])} | {_fmt(re_['own_step_frequency_hz'])} | "
+                     f"{_fmt(ratio)} | {_fmt(m['own_step_height_m'])} | {_fmt(re_['own_step_height_m'])} | "
+                     f"{_fmt(m['own_skate_ratio'])} | {_fmt(re_['own_skate_ratio'])} | "
+                     f"{_fmt(m['own_lower_foot_height_m'])} | {_fmt(re_['own_lower_foot_height_m'])} | "
+                     f"{_fmt(m['sra_top1_own_speed'])} | {_fmt(m['sra_top1_speed_free_own_speed'])} | "
+                     f"{_fmt(re_.get('sra_top1_speed_free_own_speed'))} | {_fmt(m['sra_top1_default_speed'])} | "
+                     f"{_fmt(m['sra_top1_speed_free_default_speed'])} |")
+    speeds = z["speeds_m_per_s"]
+    lo, hi = z["fit_band_m_per_s"]
+    lines += ["", f"Step frequency (Hz) against speed on a straight line, one draw per style and seed (mean over "
+                  f"seeds); slope fitted over {lo:g}-{hi:g} m/s; real: held-out clips of the style in that band "
+                  f"(within styles, pooled: {_fmt(z['real_slope_within_styles'])}; one line across styles: "
+                  f"{_fmt(z['real_slope_across_styles'])}):", "",
+              "| style | " + " | ".join(f"{v:g} m/s" for v in speeds) + " | slope gen | slope real |",
+              "|" + "---|" * (len(speeds) + 3)]
+    for name, v in r["per_style"].items():
+        g = v["generated"]
+        if "stride_speed_slope" not in g:
+            continue
+        lines.append(f"| {name} | " + " | ".join(_fmt(g[f"step_frequency_hz@{s:g}"]["mean"]) for s in speeds)
+                     + f" | {_fmt(g['stride_speed_slope']['mean'])} | {_fmt(v['real'].get('stride_speed_slope'))} |")
+    lines += ["", "Stride measured three ways on the held-out clips (median per style, metres per gait cycle): "
+                  "the training's target (speed of the smoothed pelvis path over the step frequency), path "
+                  "length over duration over the step frequency, and the path between the first and last "
+                  "counted half-cycle over the cycles counted:", "",
+              "| style | clips | training's measure | distance per cycle | counted | speed (m/s) |",
+              "|---|---|---|---|---|---|"]
+    for name in h["style_names"]:
+        rows = [c for c in z["stride_clips"] if c["style"] == name]
+        if not rows:
+            continue
+
+        def med(k, rows=rows):
+            v = np.asarray([c[k] for c in rows if c[k] is not None], np.float64)
+            v = v[np.isfinite(v)]
+            return float(np.median(v)) if v.size else float("nan")
+        lines.append(f"| {name} | {len(rows)} | {_fmt(med('training_stride_m'))} | "
+                     f"{_fmt(med('distance_per_cycle_m'))} | {_fmt(med('counted_stride_m'))} | "
+                     f"{_fmt(med('speed_mps'))} |")
+    return lines
 
 
 def plot_confusion(conf_gen, conf_real, style_names, path) -> Path:

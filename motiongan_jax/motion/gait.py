@@ -100,3 +100,49 @@ def contact_height_threshold(foot_heights_real_N, percentile: float = 10.0) -> f
     if not 0.0 <= p <= 100.0:
         raise ValueError(f"percentile: must lie in [0, 100], got {percentile}")
     return float(np.percentile(heights, p))
+
+
+def _floor_path_length(p_Tx3: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(p_Tx3[:, [0, 2]], axis=0), axis=-1)))
+
+
+def walking_speed_mps(root_Tx3, fps: float) -> float:
+    """Mean walking speed (m/s): the root's floor path length over the clip's duration."""
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    return _floor_path_length(root) * arrays.positive(fps, "fps") / (root.shape[0] - 1)
+
+
+def distance_per_cycle_m(root_Tx3, heights_Tx2, fps: float) -> float:
+    """Distance walked per gait cycle (metres; one left and one right step): walking speed over
+    step frequency (`step_frequency_hz`). nan where the step frequency is."""
+    return walking_speed_mps(root_Tx3, fps) / step_frequency_hz(heights_Tx2, fps)
+
+
+def counted_gait_cycles(root_Tx3, heights_Tx2, fps: float, hysteresis: float = 0.3) -> dict:
+    """Gait cycles counted, not read off a spectrum: the left − right toe height (its 2-second
+    moving average removed) crosses from above +h to below −h and back, h = `hysteresis` × its
+    std, twice per cycle. Returns {"cycles": half-cycles between the first and last crossing / 2,
+    "distance_m": the root's floor path between them, "stride_m": distance per counted cycle,
+    "frequency_hz": cycles per second between them}; nan values with fewer than 3 crossings."""
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    h = arrays.float_array(heights_Tx2, "heights_Tx2", 2, shape=(root.shape[0], 2), min_len=2)
+    fps = arrays.positive(fps, "fps")
+    d = h[:, 0] - h[:, 1]
+    w = max(int(round(2.0 * fps)), 1)
+    d = d - np.convolve(np.pad(d, (w // 2, w - 1 - w // 2), mode="edge"), np.ones(w) / w, mode="valid")
+    thr = hysteresis * np.std(d)
+    state, crossings = 0, []
+    for t, v in enumerate(d):
+        s = 1 if v > thr else (-1 if v < -thr else 0)
+        if s and s != state:
+            if state:
+                crossings.append(t)
+            state = s
+    nan = {"cycles": float("nan"), "distance_m": float("nan"), "stride_m": float("nan"),
+           "frequency_hz": float("nan")}
+    if len(crossings) < 3:
+        return nan
+    a, b = crossings[0], crossings[-1]
+    cycles = (len(crossings) - 1) / 2
+    dist = _floor_path_length(root[a:b + 1])
+    return {"cycles": cycles, "distance_m": dist, "stride_m": dist / cycles, "frequency_hz": cycles * fps / (b - a)}
