@@ -70,8 +70,7 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
             natural = None if length is None else float(length)
             total = natural
             if total is None:
-                total = {"line": scale, "circle": 2 * math.pi * scale, "s_curve": 2 * math.pi * scale,
-                         "figure8": 4 * math.pi * scale, "corner": 2 * scale}[text]
+                total = curves.natural_length(text, scale)
             if math.isfinite(total) and total > limits.MAX_CURVE_LENGTH_M:
                 raise limits.GenerateError(limits.too_long_message(f"curve {text!r}", total))
             num = int(min(max(total * SHAPE_POINTS_PER_M, 256), limits.MAX_CURVE_POINTS))
