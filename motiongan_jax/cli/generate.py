@@ -31,7 +31,7 @@ Errors: a message on stderr, exit status 2, and no output file.
 import argparse
 import sys
 
-from motiongan_jax.cli import add_model_arguments
+from motiongan_jax.cli import add_model_arguments, use_compilation_cache
 
 
 def _log(msg: str) -> None:
@@ -100,6 +100,7 @@ def main(argv=None) -> int:
         if missing:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
         writers.check_output_path(args.out)  # fail before the model is loaded
+        use_compilation_cache()  # G compiled by an earlier run is loaded, not compiled again
         if args.speed is not None:
             limits.check_speed(args.speed)
         if args.curve in curves.SHAPES:

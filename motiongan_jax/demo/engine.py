@@ -49,7 +49,7 @@ GIF_MAX_FRAMES = 300  # 20 s at 15 Hz: matplotlib draws a few frames a second
 STYLE_CACHE = 256  # style codes kept per (styles, z): the same style again costs no G call
 SAMPLE_BUCKETS = (16, 32, 48, 64, 96, 128, 160, 192, 256, 320, 384, 512, 640, 768, 1024)
 BATCH_BUCKETS = (1, 2, 4, 8)
-WARM_MAX_SAMPLES = 256  # warm_up compiles the buckets up to here (21 s of walking at 15 Hz)
+WARM_FIRST_SAMPLES = 256  # warm_up compiles the buckets up to here first (21 s of walking at 15 Hz)
 EXPORT_FORMATS = {"bvh": "text/plain", "npz": "application/octet-stream", "gif": "image/gif"}
 DIGITS = 4  # decimals of the metres sent to the page (0.1 mm)
 
@@ -204,6 +204,8 @@ class Engine:
         self.rate = walk.sample_rate(meta, cfg)
         self.title, self.details = title, details
         self._warm = threading.Event()
+        self._compiled: set[tuple[int, int]] = set()  # (sample bucket, batch bucket) G has run at
+        self._compile_times: list[float] = []  # seconds of each first run at a new pair
         self._codes: collections.OrderedDict = collections.OrderedDict()
         self._codes_lock = threading.Lock()
 
@@ -218,7 +220,20 @@ class Engine:
                        "max_samples": SAMPLE_BUCKETS[-1], "speed_m_per_s": list(SPEED_RANGE_M_PER_S),
                        "gif_max_frames": GIF_MAX_FRAMES},
             "warm": self._warm.is_set(),
+            # what the page can tell its user while it waits: which programs are compiled, how many to go
+            "compiled": self.compiled(), "programs": len(warm_plan()), "compile_s": self.compile_seconds(),
+            "buckets": {"samples": list(SAMPLE_BUCKETS), "batch": list(BATCH_BUCKETS)},
         }
+
+    def compiled(self) -> list[tuple[int, int]]:
+        """The (sample bucket, batch bucket) pairs G has run at in this process."""
+        with self._codes_lock:
+            return sorted(self._compiled)
+
+    def compile_seconds(self) -> float | None:
+        """The median wait of a first run at a new (samples, batch) pair so far (None: none yet)."""
+        with self._codes_lock:
+            return round(float(np.median(self._compile_times)), 1) if self._compile_times else None
 
     def check_style(self, text) -> dict:
         """The parsed form of one style string (the page's live check); StyleError as generate.py."""
@@ -234,11 +249,15 @@ class Engine:
                                      "bin/generate.py); give a name, a mix or an expression")
         return styles_lib.parse_style(text, self.style_names, seed)
 
-    def shape(self, name, length=None, scale=2.0) -> np.ndarray:
-        """A built-in shape's floor points (generate.user_curves.load_curve), at most a few hundred."""
+    def shape(self, name, length=None, scale=None) -> np.ndarray:
+        """A built-in shape's floor points (generate.user_curves.load_curve), at most a few hundred.
+        Without a scale, one period of the shape at the given length (the page's presets: a
+        circle of that circumference, a figure-8 of two lobes); without either, scale 2 m."""
         if not isinstance(name, str) or name not in curves.SHAPES:
             raise RequestError(f"unknown shape {name!r}; valid shapes: {', '.join(curves.SHAPES)}"[:200])
         length = None if length is None else _number(length, "'length'")
+        if scale is None:
+            scale = 2.0 if length is None or length <= 0 else curves.scale_for_length(name, length)
         scale = _number(scale, "'scale'")
         if length is not None and not 0 < length <= MAX_PATH_M:
             raise RequestError(f"'length' must be in (0, {MAX_PATH_M:g}] m, got {length:g}")
@@ -249,7 +268,7 @@ class Engine:
         if total > MAX_PATH_M:
             raise RequestError(f"shape {name} at scale {scale:g} m is {total:.1f} m long; the demo "
                                f"walks at most {MAX_PATH_M:g} m")
-        return curves.resample_polyline(pts, num_points=int(min(max(total / 0.05, 2), 1200)) + 1)
+        return curves.resample_polyline(pts, num_points=int(min(max(total / 0.05, 200), 1200)) + 1)
 
     # -- generation -----------------------------------------------------------------------------
     def run(self, req: Request, max_frames: int | None = None, max_motions: int = MAX_MOTIONS) -> Result:
@@ -276,7 +295,13 @@ class Engine:
         B = len(w)
         Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
         w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
+        new = (Tb, Bb) not in self.compiled()
+        t0 = time.perf_counter()
         full = walk.generate_motion(self.state, self.layout, walk.extend_straight(curve_T, Tb - T), w_pad)
+        with self._codes_lock:
+            self._compiled.add((Tb, Bb))
+            if new:  # compiled (or loaded from the persistent cache): what a first request waits
+                self._compile_times.append(time.perf_counter() - t0)
         raw = full.positions[:B, :T].copy()
         raw[..., 1] -= full.floor_shift_m[:B, None, None]
         shift = walk.floor_shift(raw)
@@ -350,15 +375,30 @@ class Engine:
             return paths[0].read_bytes(), name, EXPORT_FORMATS[fmt]
 
     # -- warm-up --------------------------------------------------------------------------------
-    def warm_up(self, max_samples: int = WARM_MAX_SAMPLES, batches=(1,)) -> float:
-        """Compiles G for every sample bucket up to `max_samples` and the given batch buckets (and
-        the style codes for z = zero), so the first drawn paths do not wait; returns seconds."""
+    def warm_up(self, run=None, plan=None) -> float:
+        """Compiles G for every (sample bucket, batch bucket) of `plan` (default: warm_plan(), all
+        the page can ask for) not compiled yet, and the style codes of every z the page can ask
+        for, so that no request waits for a compile; `run(fn, *args)` runs each (the server's
+        generation slot). Returns seconds."""
         t0 = time.perf_counter()
+        run = run or _call
         name = self.style_names[0]
-        for b in batches:
-            for T in (t for t in SAMPLE_BUCKETS if t <= max_samples):
-                # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
-                pts = np.array([[0.0, 0.0], [(T - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
-                self.run(Request(pts, (name,) * b, "zero", 0, None))
+        for k in range(1, MAX_SAMPLES_Z + 1):  # the latent codes of z = K (z = zero/seed: K = 1)
+            run(self._spec_codes, [self._spec(name, 0)], styles_lib.z_codes(self.state, k, 0))
+        for T, B in plan or warm_plan():
+            if (T, B) in self.compiled():
+                continue
+            # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
+            pts = np.array([[0.0, 0.0], [(T - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
+            run(self.run, Request(pts, (name,) * B, "zero", 0, None))
         self._warm.set()
         return time.perf_counter() - t0
+
+
+def warm_plan() -> list[tuple[int, int]]:
+    """Every (sample bucket, batch bucket) the page can ask for, most wanted first: one walk of
+    ordinary length, then side by side and z samples, then long paths and 8 walks."""
+    short = [T for T in SAMPLE_BUCKETS if T <= WARM_FIRST_SAMPLES]
+    long = [T for T in SAMPLE_BUCKETS if T > WARM_FIRST_SAMPLES]
+    return ([(T, B) for B in BATCH_BUCKETS[:3] for T in short] + [(T, 1) for T in long]
+            + [(T, B) for B in BATCH_BUCKETS[1:3] for T in long] + [(T, BATCH_BUCKETS[3]) for T in short + long])

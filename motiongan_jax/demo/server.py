@@ -23,7 +23,6 @@ its generation slot back, MAX_EXPORTS at a time (a GIF takes matplotlib seconds 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import threading
 import time
@@ -32,7 +31,7 @@ from pathlib import Path
 from flask import Flask, jsonify, request, send_from_directory
 from werkzeug.exceptions import HTTPException
 
-from motiongan_jax.cli import add_model_arguments
+from motiongan_jax.cli import add_model_arguments, use_compilation_cache
 from motiongan_jax.data import curves
 from motiongan_jax.demo import engine as engine_lib
 from motiongan_jax.generate import limits
@@ -68,6 +67,14 @@ def create_app(engine: engine_lib.Engine) -> Flask:
             return fn(*args)
         finally:
             sem.release()
+
+    def patient(fn, *args):
+        with slots:
+            return fn(*args)
+
+    # the background warm-up compiles in a generation slot too (waiting as long as it takes), so a
+    # request waits for one compile at most
+    app.config["run_in_slot"] = patient
 
     def body():
         if not request.is_json:
@@ -127,7 +134,7 @@ def create_app(engine: engine_lib.Engine) -> Flask:
             except ValueError:
                 raise engine_lib.RequestError(f"'{key}' must be a number, got {args[key]!r}"[:200]) from None
 
-        pts = engine.shape(args.get("name"), num("length", None), num("scale", 2.0))
+        pts = engine.shape(args.get("name"), num("length", None), num("scale", None))
         return jsonify(points=pts.round(engine_lib.DIGITS).tolist())
 
     @app.post("/api/style")
@@ -167,17 +174,6 @@ def load_engine(workdir=None, model=None, step=None, params="ema") -> engine_lib
                  + f" · {cfg.name} config · {p['steps']} steps · seed {p['seed']}")
         details = export.describe()
     return engine_lib.Engine(state, meta, cfg, layout, title, details)
-
-
-def _compilation_cache() -> None:
-    """G's compiled programs persist between runs of the demo (unless the user set a cache)."""
-    import jax
-
-    if os.environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir:
-        return
-    from motiongan_jax.data.dataset import cache_root
-
-    jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
 
 
 def make_server(app, host: str, port: int, debug: bool = False):
@@ -221,14 +217,15 @@ def main(argv=None) -> int:
 
     from motiongan_jax.train.checkpoint import CheckpointError
 
-    _compilation_cache()
+    use_compilation_cache()
     try:
         engine = load_engine(args.workdir, args.model, args.step, args.params)
     except CheckpointError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     try:
-        server = make_server(create_app(engine), args.host, args.port, args.debug)
+        app = create_app(engine)
+        server = make_server(app, args.host, args.port, args.debug)
     except (OSError, ValueError) as err:  # port taken, address not ours, a host name that does not resolve
         why = getattr(err, "strerror", None) or err
         print(f"error: cannot listen on {args.host}:{args.port}: {why}", file=sys.stderr)
@@ -238,8 +235,9 @@ def main(argv=None) -> int:
     print(f"serving on http://{host}:{server.port}/  (Ctrl-C to stop)", flush=True)
     if not args.no_warm_up:
         def warm():
-            secs = engine.warm_up()
-            print(f"warmed up in {secs:.1f} s (paths up to {engine_lib.WARM_MAX_SAMPLES} samples)", flush=True)
+            secs = engine.warm_up(run=app.config["run_in_slot"])
+            print(f"warmed up in {secs:.1f} s: every path length and number of walks the page can ask for",
+                  flush=True)
 
         threading.Thread(target=warm, daemon=True).start()
     try:
