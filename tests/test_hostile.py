@@ -338,6 +338,16 @@ def test_generate_cli_gives_the_parsers_message_for_a_style(tmp_path, style):
     assert not out.exists()
 
 
+def test_other_tools_refuse_a_bad_seed_and_an_unwritable_picture(repo, tmp_path):
+    code, _, err = run_cli("train", ["--config", repo / "configs" / "tiny.py", "--workdir", tmp_path, "--seed",
+                                     "99999999999999999999999", "--dry-run"])
+    assert code == 2 and "--seed must be an integer 0..2147483647" in err
+    code, _, err = run_cli("demo_screenshot", ["--out", tmp_path / "missing" / "a.png"])
+    assert code == 2 and "cannot write" in err and "Traceback" not in err
+    code, _, err = run_cli("demo_screenshot", ["--out", tmp_path / "a.png", "--size", "big"])
+    assert code == 2 and "--size must be WIDTHxHEIGHT" in err
+
+
 BVH_170 = """HIERARCHY
 ROOT Hips
 {
