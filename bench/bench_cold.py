@@ -2,8 +2,10 @@
 """Cold starts (run by hand, never in CI): a fresh `motiongan-generate` end to end, and the first
 request of each kind on a freshly started `motiongan-demo`, without the persistent compilation
 cache (every process compiles G from nothing) and with it (a first process fills the cache
-folder, the next ones load from it). Prints seconds; each process is new, so nothing is warm in
-memory. The cache folder is a temporary one, the user's is left alone.
+folder, the next ones load from it). Prints seconds of wall time and of CPU time (user + system:
+the generate process's, or the server process's during the request), the CPU time being the
+steadier figure on a shared machine. Each process is new, so nothing is warm in memory. The
+cache folder is a temporary one, the user's is left alone.
 
   JAX_PLATFORMS=cpu python -m bench.bench_cold [--skip-server] [--skip-generate]
 """
@@ -12,6 +14,7 @@ import argparse
 import json
 import os
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -31,12 +34,22 @@ def _env(cache: str | None) -> dict:
     return env
 
 
-def generate_once(cache, out_dir) -> float:
-    t = time.perf_counter()
+def generate_once(cache, out_dir) -> str:
+    """'wall s (CPU s)' of one fresh motiongan-generate."""
+    t, r0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
     main = "from motiongan_jax.cli.generate import main; raise SystemExit(main())"  # motiongan-generate
     subprocess.run([sys.executable, "-c", main, *GENERATE, "--out", f"{out_dir}/w.npz"],
                    env=_env(cache), check=True, capture_output=True)
-    return time.perf_counter() - t
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
+    return f"{time.perf_counter() - t:6.1f} s wall ({cpu:5.1f} s CPU)"
+
+
+def _cpu(pid: int) -> float:
+    """User + system seconds of process `pid` so far (all its threads)."""
+    with open(f"/proc/{pid}/stat") as fh:
+        fields = fh.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _post(url, body, timeout=600):
@@ -51,8 +64,8 @@ def _post(url, body, timeout=600):
     return time.perf_counter() - t, code
 
 
-def server_firsts(cache, warm_up: bool) -> list[tuple[str, float, int]]:
-    """(kind, seconds, status) of the first request of each kind on a fresh server."""
+def server_firsts(cache, warm_up: bool) -> list[tuple[str, float, float, int]]:
+    """(kind, wall s, server CPU s, status) of the first request of each kind on a fresh server."""
     args = [sys.executable, "-m", "motiongan_jax.demo", "--port", "0"] + ([] if warm_up else ["--no-warm-up"])
     t_start = time.perf_counter()
     proc = subprocess.Popen(args, env=_env(cache), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -65,16 +78,16 @@ def server_firsts(cache, warm_up: bool) -> list[tuple[str, float, int]]:
                 raise RuntimeError("the demo exited")
             m = re.search(r"serving on (http://\S+)/", line)
             base = m.group(1) if m else None
-        out.append(("start (model loaded, listening)", time.perf_counter() - t_start, 0))
+        out.append(("start (model loaded, listening)", time.perf_counter() - t_start, _cpu(proc.pid), 0))
         if warm_up:
-            t = time.perf_counter()
+            t, c = time.perf_counter(), _cpu(proc.pid)
             while "warmed up" not in proc.stdout.readline():
                 pass
-            out.append(("background warm-up, all programs", time.perf_counter() - t, 0))
-        t = time.perf_counter()
+            out.append(("background warm-up, all programs", time.perf_counter() - t, _cpu(proc.pid) - c, 0))
+        t, c = time.perf_counter(), _cpu(proc.pid)
         with urllib.request.urlopen(base + "/api/model") as r:
             r.read()
-        out.append(("GET /api/model", time.perf_counter() - t, 200))
+        out.append(("GET /api/model", time.perf_counter() - t, _cpu(proc.pid) - c, 200))
         path10 = json.loads(urllib.request.urlopen(base + "/api/shape?name=s_curve&length=10").read())["points"]
         circle60 = json.loads(urllib.request.urlopen(base + "/api/shape?name=circle&length=60&scale=9.5")
                               .read())["points"]
@@ -92,8 +105,9 @@ def server_firsts(cache, warm_up: bool) -> list[tuple[str, float, int]]:
             ("export: GIF of a 4 m line", "/api/export", {"points": short, "styles": ["Sad"], "format": "gif"}),
         ]
         for kind, route, body in kinds:
+            c = _cpu(proc.pid)
             dt, code = _post(base + route, body)
-            out.append((kind, dt, code))
+            out.append((kind, dt, _cpu(proc.pid) - c, code))
     finally:
         proc.terminate()
         proc.wait(30)
@@ -112,25 +126,26 @@ def main() -> None:
         cache = os.path.join(tmp, "xla")
         if not args.skip_generate:
             print("\nmotiongan-generate " + " ".join(GENERATE) + " --out w.npz, a fresh process each:")
-            print(f"  no cache:                  {generate_once(None, tmp):6.1f} s")
-            print(f"  cache, first run (fills):  {generate_once(cache, tmp):6.1f} s")
+            print(f"  no cache:                  {generate_once(None, tmp)}")
+            print(f"  cache, first run (fills):  {generate_once(cache, tmp)}")
             for i in range(2):
-                print(f"  cache, run {i + 2}:              {generate_once(cache, tmp):6.1f} s")
+                print(f"  cache, run {i + 2}:              {generate_once(cache, tmp)}")
         if not args.skip_server:
             runs = [("no cache", None, False), ("cache, first start (fills)", cache, False),
                     ("cache, second start", cache, False)]
             if args.warm_up:
                 runs.append(("cache, warm-up first", cache, True))
             results = [(name, server_firsts(c, w)) for name, c, w in runs]
-            kinds = [k for k, _, _ in results[-1][1]]
-            print("\nfirst request of each kind on a fresh motiongan-demo (s; --no-warm-up unless said):")
-            print(f"  {'kind':40s}" + "".join(f"{n:>28s}" for n, _ in results))
+            kinds = [k for k, _, _, _ in results[-1][1]]
+            print("\nfirst request of each kind on a fresh motiongan-demo, s wall (s of the server's CPU);"
+                  " --no-warm-up unless said:")
+            print(f"  {'kind':40s}" + "".join(f"{n:>30s}" for n, _ in results))
             for kind in kinds:
                 row = []
                 for _, res in results:
-                    hit = [(dt, code) for k, dt, code in res if k == kind]
-                    row.append(f"{hit[0][0]:24.2f}{'' if hit[0][1] in (0, 200) else f' ({hit[0][1]})':>4s}"
-                               if hit else f"{'':>28s}")
+                    hit = [(dt, cpu, code) for k, dt, cpu, code in res if k == kind]
+                    row.append(f"{hit[0][0]:16.2f} ({hit[0][1]:6.2f})"
+                               + (f" {hit[0][2]}" if hit[0][2] not in (0, 200) else "    ") if hit else f"{'':>30s}")
                 print(f"  {kind:40s}" + "".join(row))
     print(load())
 

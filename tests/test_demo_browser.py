@@ -199,9 +199,9 @@ def _overlap(a, b) -> float:
 
 
 def test_no_control_covers_another_from_800_to_2560_px(playwright_api, demo_url):
-    """The longest status line and motion title the page can show (a mix of six styles, z = 4
-    samples) make the bottom bar wrap; nothing may then be drawn over anything else, and every
-    control stays inside the window's width."""
+    """A wait for a compile is explained on the page. The longest status line and motion title the
+    page can show (a mix of six styles, z = 4 samples) make the bottom bar wrap; nothing may then be
+    drawn over anything else, and every control stays inside the window's width."""
     with playwright_api() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
@@ -211,6 +211,19 @@ def test_no_control_covers_another_from_800_to_2560_px(playwright_api, demo_url)
             page.locator("#auto").uncheck()
             page.locator("#presets button", has_text="Figure-8").click()
             page.wait_for_function("window.demo.state.strokes.length === 1")
+
+            # a generation that waits says for what: held here before it reaches the server, so
+            # the 10 m figure-8's bucket (126 samples -> 128, one walk) is not compiled yet
+            held = []
+            page.route("**/api/generate", lambda route: held.append(route))
+            page.locator("#generate").click()
+            page.wait_for_function("document.getElementById('status').textContent.includes('compiling')")
+            assert re.fullmatch(r"generating… compiling the generator for paths of 128 samples × 1 walk, once "
+                                r"\((about \d+ s|a few seconds)\); warmed up \d+ of 60",
+                                page.locator("#status").inner_text()), page.locator("#status").inner_text()
+            held[0].abort()
+            page.unroute("**/api/generate")
+
             title = "Childish:0.167,Drunk:0.167,Happy:0.167,Marching:0.167,Normal:0.167,OldMan:0.167 z3"
             page.evaluate(f"""() => {{
                 const o = document.createElement("option"); o.textContent = {title!r};
