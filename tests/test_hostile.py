@@ -458,3 +458,24 @@ def test_fuzz_style_200_with_finite_json_or_a_4xx_naming_the_problem(client, bod
     status, answer = _answer(client, "/api/style", body)
     if status == 200:
         assert all(math.isfinite(c) for _, c in answer["terms"])
+
+
+NUMBER_TEXT = st.one_of(st.floats().map(repr), st.integers(-10**400, 10**400).map(str), st.text(max_size=6))
+
+
+@FUZZ
+@given(name=st.one_of(st.sampled_from(["line", "circle", "s_curve", "figure8", "corner"]), st.text(max_size=8)),
+       length=st.one_of(st.none(), NUMBER_TEXT), scale=st.one_of(st.none(), NUMBER_TEXT))
+def test_fuzz_shape_200_with_finite_points_or_a_400(client, name, length, scale):
+    query = {"name": name, **({"length": length} if length is not None else {}),
+             **({"scale": scale} if scale is not None else {})}
+    r = client.get("/api/shape", query_string=query)
+    assert r.status_code in (200, 400), (query, r.status_code, r.data[:300])
+    answer = _finite_json(r.data.decode())
+    event(f"/api/shape {r.status_code}")
+    if r.status_code == 200:
+        pts = np.array(answer["points"])
+        assert pts.shape[1] == 2 and len(pts) >= 2
+        assert np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)) <= E.MAX_PATH_M * 1.001
+    else:
+        assert answer["error"]
