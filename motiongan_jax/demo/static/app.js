@@ -469,6 +469,12 @@
     if (!S.request) return;
     const btn = $("dl-" + fmt), label = btn.textContent;
     btn.disabled = true; btn.textContent = fmt === "gif" ? "drawing…" : "…";
+    if (fmt === "gif" && S.result) {
+      // matplotlib draws every frame of every panel: about 0.07 s each on one core (docs/PERFORMANCE.md)
+      const n = S.result.frames * S.result.motions.length;
+      setStatus(`drawing the GIF: ${S.result.frames} frames × ${S.result.motions.length} panel(s), ` +
+                `about ${Math.max(1, Math.round(n * 0.07))} s`);
+    }
     try {
       const r = await api("/api/export", { ...S.request, format: fmt, index: S.selected });
       const blob = await r.blob();
@@ -481,7 +487,10 @@
       setTimeout(() => URL.revokeObjectURL(a.href), 10000);
       showError(null);
     } catch (e) { showError(e.message); }
-    finally { btn.disabled = false; btn.textContent = label; }
+    finally {
+      btn.disabled = false; btn.textContent = label;
+      if (fmt === "gif") setStatus("");
+    }
   }
 
   // ------------------------------------------------------------------------------------------
