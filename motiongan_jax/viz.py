@@ -26,17 +26,38 @@ def _bones(parents):
     return [(int(p), c) for c, p in enumerate(parents) if p >= 0]
 
 
+def gif_durations_ms(frames: int, fps: float) -> list[int]:
+    """Per-frame GIF delays in ms: GIFs count in hundredths of a second, so 1/15 s cannot be one
+    delay (66 ms is stored as 60: a walk 10 % fast); whole hundredths that add up to frame i's
+    time, rounded, after every frame keep the clock right (15 Hz: 70, 60, 70, 70, 60, ...)."""
+    ticks = [round(i * 100 / fps) for i in range(frames + 1)]
+    return [10 * (b - a) for a, b in zip(ticks, ticks[1:])]
+
+
+def _gif_writer_class():
+    from matplotlib.animation import PillowWriter
+
+    class GifWriter(PillowWriter):
+        """matplotlib's Pillow writer with delays that keep the frame rate (gif_durations_ms)."""
+
+        def finish(self):
+            self._frames[0].save(self.outfile, save_all=True, append_images=self._frames[1:],
+                                 duration=gif_durations_ms(len(self._frames), self.fps), loop=0)
+
+    return GifWriter
+
+
 def video_writer(path, fps: float):
     """A matplotlib writer for `path`'s suffix: .gif (Pillow) or .mp4 (ffmpeg: the one on PATH,
     else imageio-ffmpeg's if that is installed). RuntimeError naming the fix when there is none."""
     import shutil
 
     from matplotlib import rcParams
-    from matplotlib.animation import FFMpegWriter, PillowWriter
+    from matplotlib.animation import FFMpegWriter
 
     suffix = Path(path).suffix.lower()
     if suffix == ".gif":
-        return PillowWriter(fps=fps)
+        return _gif_writer_class()(fps=fps)
     if suffix == ".mp4":
         exe = shutil.which("ffmpeg")
         if exe is None:

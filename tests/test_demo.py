@@ -295,3 +295,70 @@ def test_cli_refuses_bad_arguments(tmp_path, capsys):
     assert e.value.code == 2
     assert server.main(["--model", str(tmp_path / "missing.npz")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name, turning", [("circle", 2 * np.pi), ("figure8", 0.0), ("s_curve", 0.0)])
+@pytest.mark.parametrize("length", [1.0, 10.0, E.MAX_PATH_M])
+def test_the_page_presets_make_one_whole_shape_at_every_length(client, name, turning, length):
+    """Without a scale, a shape of length L is one period: a circle of circumference L (not laps
+    of a 2 m circle), a figure-8 of two lobes, one S; closed shapes end where they start."""
+    pts = np.array(client.get(f"/api/shape?name={name}&length={length}").get_json()["points"])
+    seg = np.diff(pts, axis=0)
+    assert np.sum(np.linalg.norm(seg, axis=1)) == pytest.approx(length, rel=2e-3)
+    heading = np.unwrap(np.arctan2(seg[:, 1], seg[:, 0]))
+    assert heading[-1] - heading[0] == pytest.approx(turning, abs=0.1)  # total turning
+    if name == "circle":  # every point at the radius L / 2 pi from the centre
+        r = length / (2 * np.pi)
+        np.testing.assert_allclose(np.linalg.norm(pts - [0, r], axis=1), r, atol=2e-3 * length)
+    if name == "figure8":  # two lobes of radius L / 4 pi, one each side of the start, meeting there
+        r = length / (4 * np.pi)
+        half = len(pts) // 2
+        assert pts[:half, 1].max() == pytest.approx(2 * r, rel=0.02)
+        assert pts[half:, 1].min() == pytest.approx(-2 * r, rel=0.02)
+        assert np.linalg.norm(pts[half]) < 0.02 * length
+    if name != "s_curve":
+        assert np.linalg.norm(pts[-1] - pts[0]) < 0.01 * length
+
+
+def test_gif_frames_keep_the_walks_clock():
+    """GIF delays are whole hundredths of a second: at 15 Hz they alternate so that frame i ends
+    at i / 15 s (rounded), instead of 1/15 s rounded down to 60 ms (10 % fast)."""
+    from motiongan_jax import viz
+
+    d = viz.gif_durations_ms(30, 15.0)
+    assert d[:6] == [70, 60, 70, 70, 60, 70] and sum(d) == 2000
+    assert all(abs(sum(d[:i]) - 1000 * i / 15) <= 5 for i in range(31))
+    assert viz.gif_durations_ms(4, 10.0) == [100] * 4
+
+
+def test_warm_up_compiles_what_the_page_can_ask_for(engine):
+    plan = E.warm_plan()
+    assert sorted(plan) == sorted((T, B) for T in E.SAMPLE_BUCKETS for B in E.BATCH_BUCKETS)
+    assert plan[0] == (16, 1) and len(set(plan)) == len(plan)
+    fresh = E.Engine(engine.state, engine.meta, engine.cfg, engine.layout)
+    assert fresh.info()["compiled"] == [] and not fresh.info()["warm"]
+    ran = []
+    fresh.warm_up(run=lambda fn, *args: ran.append(fn.__name__) or fn(*args), plan=[(48, 1)])  # test_demo's
+    info = fresh.info()
+    assert info["compiled"] == [(48, 1)] and info["warm"] and info["compile_s"] is not None
+    assert ran == ["_spec_codes"] * E.MAX_SAMPLES_Z + ["run"]  # every z's codes, then G, each in a slot
+
+
+def test_the_compilation_cache_folder_is_the_users_unless_told(monkeypatch, tmp_path):
+    import jax
+
+    from motiongan_jax.cli import COMPILE_CACHE_ENV, use_compilation_cache
+
+    before = jax.config.jax_compilation_cache_dir
+    try:
+        monkeypatch.setenv(COMPILE_CACHE_ENV, "off")
+        assert use_compilation_cache() is None
+        monkeypatch.setenv(COMPILE_CACHE_ENV, str(tmp_path / "xla"))
+        assert use_compilation_cache() == str(tmp_path / "xla") == jax.config.jax_compilation_cache_dir
+        monkeypatch.delenv(COMPILE_CACHE_ENV)
+        assert use_compilation_cache() == str(tmp_path / "xla")  # a folder JAX was given is kept
+        jax.config.update("jax_compilation_cache_dir", None)
+        monkeypatch.setenv("MOTIONGAN_CACHE", str(tmp_path / "root"))
+        assert use_compilation_cache() == str(tmp_path / "root" / "xla")
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)

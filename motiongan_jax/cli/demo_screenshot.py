@@ -8,9 +8,11 @@ Needs `apt-get install chromium` and the test extra (Playwright); never `playwri
 """
 
 import argparse
+import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",
         "--disable-component-update", "--disable-sync", "--no-first-run"]
@@ -26,7 +28,15 @@ def main(argv=None) -> int:
     ap.add_argument("--size", default="1440x860", help="viewport WIDTHxHEIGHT")
     ap.add_argument("--frame", type=int, default=6, help="the frame shown (the walk is paused there)")
     args = ap.parse_args(argv)
-    width, height = (int(v) for v in args.size.split("x"))
+    try:
+        width, height = (int(v) for v in args.size.split("x"))
+    except ValueError:
+        ap.error(f"--size must be WIDTHxHEIGHT in pixels, e.g. 1440x860, got {args.size!r}")
+    out = Path(args.out)
+    if out.is_dir() or not out.parent.is_dir() or not os.access(out.parent, os.W_OK):
+        print(f"error: cannot write {out}: {'it is a directory' if out.is_dir() else 'no writable folder'}",
+              file=sys.stderr)
+        return 2  # before the server and the browser start
     from playwright.sync_api import sync_playwright
 
     cmd = [sys.executable, "-m", "motiongan_jax.demo", "--port", "0", "--no-warm-up"]

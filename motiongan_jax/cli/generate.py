@@ -31,7 +31,7 @@ Errors: a message on stderr, exit status 2, and no output file.
 import argparse
 import sys
 
-from motiongan_jax.cli import add_model_arguments
+from motiongan_jax.cli import add_model_arguments, use_compilation_cache
 
 
 def _log(msg: str) -> None:
@@ -81,6 +81,9 @@ def main(argv=None) -> int:
 
     from motiongan_jax.data import curves
     from motiongan_jax.generate import limits, styles, user_curves, walk, writers
+
+    if not 0 <= args.seed <= limits.MAX_SEED:  # the demo's API takes the same seeds
+        ap.error(f"--seed must be an integer 0..{limits.MAX_SEED}, got {args.seed}")
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.motion.ik import IKError
     from motiongan_jax.train import checkpoint, pretrained
@@ -97,6 +100,11 @@ def main(argv=None) -> int:
         if missing:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
         writers.check_output_path(args.out)  # fail before the model is loaded
+        use_compilation_cache()  # G compiled by an earlier run is loaded, not compiled again
+        if args.speed is not None:
+            limits.check_speed(args.speed)
+        if args.curve in curves.SHAPES:
+            user_curves.check_shape_size(args.curve, args.length, args.scale)
         z_arg = args.z
         state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
         names = list(meta["style_names"])

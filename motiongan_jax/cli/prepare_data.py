@@ -4,6 +4,8 @@
 
 Arrays: positions (frames x joints x 3, every joint incl. End Sites, all clips concatenated),
 joint_names, parents, clip_start, clip_length, clip_style, style_names, fps, source_files.
+Errors (a malformed file, an unwritable --out, a skeleton of implausible height in the unit
+assumed): a message on stderr, exit status 2, and nothing written.
 """
 
 import argparse
@@ -24,12 +26,14 @@ def main(argv=None) -> int:
     ap.add_argument("--units-to-m", type=float, default=None, help="metres per file unit (overrides --labels)")
     ap.add_argument("--skip-bad", action="store_true", help="report malformed files and go on with the rest")
     args = ap.parse_args(argv)
+    if args.units_to_m is not None and not (0 < args.units_to_m < float("inf")):
+        ap.error(f"--units-to-m must be a positive number of metres, got {args.units_to_m}")
     try:
         info = write_positions_npz(args.data_dir, args.out, args.labels, args.units_to_m, args.skip_bad,
                                 log=lambda s: print(s, file=sys.stderr))
-    except (BVHError, DataError) as err:
+    except (BVHError, DataError, OSError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 1
+        return 2
     print(f"wrote {args.out}: {info['clips']} clips, {info['frames']} frames, {info['joints']} joints, "
           f"{len(info['styles'])} styles ({', '.join(info['styles'])})")
     return 0

@@ -34,6 +34,10 @@ def main(argv=None) -> int:
     ap.add_argument("--num-processes", type=int, default=None)
     ap.add_argument("--process-id", type=int, default=None)
     args = ap.parse_args(argv)
+    from motiongan_jax.generate.limits import MAX_SEED
+
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:  # the seeds generate.py and the demo take
+        ap.error(f"--seed must be an integer 0..{MAX_SEED}, got {args.seed}")
 
     from motiongan_jax.config import ConfigError, load_config, override, validate
     from motiongan_jax.data.file_labels import DataError

@@ -468,6 +468,22 @@ def _shape_segments(name: str, r: float, length: float) -> list[tuple[float, flo
     return segs
 
 
+# one natural period of each shape per metre of its scale (shape_curve's doc)
+_PERIOD_PER_SCALE = {"line": 1.0, "circle": 2 * math.pi, "s_curve": 2 * math.pi, "figure8": 4 * math.pi,
+                     "corner": 2.0}
+
+
+def natural_length(name: str, scale: float) -> float:
+    """The arc length of one period of shape `name` at `scale` metres (shape_curve's doc)."""
+    return _PERIOD_PER_SCALE[name] * scale
+
+
+def scale_for_length(name: str, length: float) -> float:
+    """The scale at which `length` metres is exactly one period of the shape: a circle whose
+    circumference is the length, a figure-8 of two lobes, one S, a corner at half way."""
+    return length / _PERIOD_PER_SCALE[name]
+
+
 def shape_curve(name: str, length: float | None = None, scale: float = 2.0,
                 num_points: int = 256) -> np.ndarray:
     """A built-in curve in metres, starting at the origin heading +x: (num_points, 2) float64,
@@ -485,9 +501,7 @@ def shape_curve(name: str, length: float | None = None, scale: float = 2.0,
     scale = float(scale)
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"scale must be a positive number of metres, got {scale}")
-    natural = {"line": scale, "circle": 2 * math.pi * scale, "s_curve": 2 * math.pi * scale,
-               "figure8": 4 * math.pi * scale, "corner": 2 * scale}[name]
-    length = natural if length is None else float(length)
+    length = natural_length(name, scale) if length is None else float(length)
     if not (math.isfinite(length) and length > 0):
         raise ValueError(f"length must be a positive number of metres, got {length}")
     if int(num_points) < 2:

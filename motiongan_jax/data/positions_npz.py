@@ -3,6 +3,7 @@ own code: what bin/prepare_data.py writes and analysis.clips.load_motion reads b
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,10 @@ from motiongan_jax import atomic
 from motiongan_jax.data.file_labels import DataError, label_from_filename
 from motiongan_jax.motion import bvh, kinematics
 from motiongan_jax.motion.representation import UNITS_TO_M
+
+# How tall a person stands (the span of the joints' heights, metres): outside it the file's unit
+# is not the one assumed (Bandai's centimetres read as CMU units make an 8 m tall walker)
+PLAUSIBLE_HEIGHT_M = (0.5, 3.0)
 
 
 def write_positions_npz(data_dir: str | Path, out: str | Path, labels: str = "paper",
@@ -22,6 +27,7 @@ def write_positions_npz(data_dir: str | Path, out: str | Path, labels: str = "pa
     data_dir, out = Path(data_dir), Path(out)
     if not data_dir.is_dir():
         raise DataError(f"data directory not found: {data_dir}")
+    _check_writable(out)  # before the files are read: that can take minutes
     motions, errors = bvh.read_bvh_dir(data_dir, skip_bad=skip_bad)
     for err in errors:
         log(f"skipped: {err}")
@@ -40,6 +46,8 @@ def write_positions_npz(data_dir: str | Path, out: str | Path, labels: str = "pa
         if label is None:
             raise DataError(f"{m.source}: file name gives no style label under --labels {labels}")
         pos = kinematics.world_positions(m) * units
+        if not positions:
+            _check_height(pos, m.source, labels, units, explicit=units_to_m is not None, log=log)
         positions.append(pos.astype(np.float32))
         starts.append(offset)
         lengths.append(len(pos))
@@ -58,8 +66,38 @@ def write_positions_npz(data_dir: str | Path, out: str | Path, labels: str = "pa
         fps=np.float64(motions[0].fps),
         source_files=np.array(sources),
     )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic.atomic_path(out) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, **arrays)
+    try:
+        with atomic.atomic_path(out) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+    except OSError as e:
+        raise DataError(f"cannot write {out}: {e.strerror or e}") from None
     return {"clips": len(motions), "frames": int(offset), "joints": len(first.names),
             "styles": style_names, "skipped": len(errors)}
+
+
+def _check_writable(out: Path) -> None:
+    """DataError unless `out` can be written (its folder made if need be)."""
+    if out.is_dir():
+        raise DataError(f"cannot write {out}: it is a directory")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise DataError(f"cannot write {out}: cannot make its folder {out.parent} ({e.strerror or e})") from None
+    if not os.access(out.parent, os.W_OK):
+        raise DataError(f"cannot write {out}: folder {out.parent} is not writable")
+
+
+def _check_height(pos, source, labels: str, units: float, explicit: bool, log) -> None:
+    """DataError (a warning when the unit was given with --units-to-m) when the first clip's
+    walker is not PLAUSIBLE_HEIGHT_M tall in the unit assumed."""
+    height = float(np.median(pos[..., 1].max(axis=1) - pos[..., 1].min(axis=1)))
+    lo, hi = PLAUSIBLE_HEIGHT_M
+    if lo <= height <= hi:
+        return
+    msg = (f"{source}: the skeleton is {height:.3g} m tall at {units:g} m per file unit, not {lo:g}-{hi:g} m: "
+           f"the files are in another unit")
+    if explicit:
+        log(f"warning: {msg} than --units-to-m {units:g}")
+        return
+    raise DataError(f"{msg} than --labels {labels} assumes; Bandai files are in centimetres (--labels bandai), "
+                    f"or give the unit with --units-to-m")

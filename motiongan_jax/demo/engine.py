@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import json
 import math
 import re
 import tempfile
@@ -30,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from motiongan_jax.data import curves
+from motiongan_jax.generate import limits, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
-from motiongan_jax.generate import user_curves, walk, writers
 
 # Limits the server enforces on every request (each breach is a 400 naming it): an interactive
 # page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
@@ -42,12 +43,13 @@ MAX_SAMPLES_Z = 4  # K of z = K
 MAX_MOTIONS = 8  # styles x K
 MAX_STYLE_CHARS = 400
 SPEED_RANGE_M_PER_S = (0.3, 3.0)
-MAX_SEED = 2**31 - 1
+MAX_SEED = limits.MAX_SEED  # the command line's too
+MAX_JSON_DEPTH = 8  # nesting of a request body (a generate body needs 3: object, points, pair)
 GIF_MAX_FRAMES = 300  # 20 s at 15 Hz: matplotlib draws a few frames a second
 STYLE_CACHE = 256  # style codes kept per (styles, z): the same style again costs no G call
 SAMPLE_BUCKETS = (16, 32, 48, 64, 96, 128, 160, 192, 256, 320, 384, 512, 640, 768, 1024)
 BATCH_BUCKETS = (1, 2, 4, 8)
-WARM_MAX_SAMPLES = 256  # warm_up compiles the buckets up to here (21 s of walking at 15 Hz)
+WARM_FIRST_SAMPLES = 256  # warm_up compiles the buckets up to here first (21 s of walking at 15 Hz)
 EXPORT_FORMATS = {"bvh": "text/plain", "npz": "application/octet-stream", "gif": "image/gif"}
 DIGITS = 4  # decimals of the metres sent to the page (0.1 mm)
 
@@ -72,11 +74,39 @@ class Request:
     seed: int
     speed: float | None
 
+    @property
+    def motions(self) -> int:
+        """How many motions it makes: one per style and z sample."""
+        return len(self.styles) * (self.z if isinstance(self.z, int) else 1)
+
+
+def decode_json(raw: bytes):
+    """A request body decoded; RequestError when it is not JSON or nested deeper than
+    MAX_JSON_DEPTH (the decoder recurses per level, so a deep body would end in RecursionError)."""
+    too_deep = RequestError(f"the request body is nested too deeply (at most {MAX_JSON_DEPTH} levels)")
+    try:
+        data = json.loads(raw)
+    except RecursionError:
+        raise too_deep from None
+    except ValueError as e:  # UnicodeDecodeError too
+        raise RequestError(f"the request body is not valid JSON: {e}"[:200]) from None
+    stack = [(data, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, (list, dict)):
+            if depth > MAX_JSON_DEPTH:
+                raise too_deep
+            stack.extend((v, depth + 1) for v in (item.values() if isinstance(item, dict) else item))
+    return data
+
 
 def _number(value, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise RequestError(f"{what} must be a number, got {type(value).__name__} {value!r}"[:200])
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:  # an integer beyond float range: JSON has no limit on digits
+        raise RequestError(f"{what} must be a finite number, got an integer beyond float range") from None
     if not math.isfinite(value):
         raise RequestError(f"{what} must be a finite number, got {value}")
     return value
@@ -129,7 +159,7 @@ def parse_request(body) -> Request:
         if len(s) > MAX_STYLE_CHARS:
             raise RequestError(f"a style of {len(s)} characters; at most {MAX_STYLE_CHARS}")
     z = body.get("z", "zero")
-    if isinstance(z, str) and z.strip().isdigit():
+    if isinstance(z, str) and z.strip().isdecimal() and len(z.strip()) <= 3:  # int() takes every decimal digit
         z = int(z)
     if isinstance(z, str):
         if z.strip().lower() not in ("zero", "seed"):
@@ -156,6 +186,10 @@ class Result:
     batch_bucket: int
 
 
+def _call(fn, *args):
+    return fn(*args)
+
+
 def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")[:60] or "walk"
 
@@ -170,6 +204,8 @@ class Engine:
         self.rate = walk.sample_rate(meta, cfg)
         self.title, self.details = title, details
         self._warm = threading.Event()
+        self._compiled: set[tuple[int, int]] = set()  # (sample bucket, batch bucket) G has run at
+        self._compile_times: list[float] = []  # seconds of each first run at a new pair
         self._codes: collections.OrderedDict = collections.OrderedDict()
         self._codes_lock = threading.Lock()
 
@@ -184,7 +220,20 @@ class Engine:
                        "max_samples": SAMPLE_BUCKETS[-1], "speed_m_per_s": list(SPEED_RANGE_M_PER_S),
                        "gif_max_frames": GIF_MAX_FRAMES},
             "warm": self._warm.is_set(),
+            # what the page can tell its user while it waits: which programs are compiled, how many to go
+            "compiled": self.compiled(), "programs": len(warm_plan()), "compile_s": self.compile_seconds(),
+            "buckets": {"samples": list(SAMPLE_BUCKETS), "batch": list(BATCH_BUCKETS)},
         }
+
+    def compiled(self) -> list[tuple[int, int]]:
+        """The (sample bucket, batch bucket) pairs G has run at in this process."""
+        with self._codes_lock:
+            return sorted(self._compiled)
+
+    def compile_seconds(self) -> float | None:
+        """The median wait of a first run at a new (samples, batch) pair so far (None: none yet)."""
+        with self._codes_lock:
+            return round(float(np.median(self._compile_times)), 1) if self._compile_times else None
 
     def check_style(self, text) -> dict:
         """The parsed form of one style string (the page's live check); StyleError as generate.py."""
@@ -200,11 +249,15 @@ class Engine:
                                      "bin/generate.py); give a name, a mix or an expression")
         return styles_lib.parse_style(text, self.style_names, seed)
 
-    def shape(self, name, length=None, scale=2.0) -> np.ndarray:
-        """A built-in shape's floor points (generate.user_curves.load_curve), at most a few hundred."""
+    def shape(self, name, length=None, scale=None) -> np.ndarray:
+        """A built-in shape's floor points (generate.user_curves.load_curve), at most a few hundred.
+        Without a scale, one period of the shape at the given length (the page's presets: a
+        circle of that circumference, a figure-8 of two lobes); without either, scale 2 m."""
         if not isinstance(name, str) or name not in curves.SHAPES:
             raise RequestError(f"unknown shape {name!r}; valid shapes: {', '.join(curves.SHAPES)}"[:200])
         length = None if length is None else _number(length, "'length'")
+        if scale is None:
+            scale = 2.0 if length is None or length <= 0 else curves.scale_for_length(name, length)
         scale = _number(scale, "'scale'")
         if length is not None and not 0 < length <= MAX_PATH_M:
             raise RequestError(f"'length' must be in (0, {MAX_PATH_M:g}] m, got {length:g}")
@@ -215,15 +268,17 @@ class Engine:
         if total > MAX_PATH_M:
             raise RequestError(f"shape {name} at scale {scale:g} m is {total:.1f} m long; the demo "
                                f"walks at most {MAX_PATH_M:g} m")
-        return curves.resample_polyline(pts, num_points=int(min(max(total / 0.05, 2), 1200)) + 1)
+        return curves.resample_polyline(pts, num_points=int(min(max(total / 0.05, 200), 1200)) + 1)
 
     # -- generation -----------------------------------------------------------------------------
-    def run(self, req: Request) -> Result:
+    def run(self, req: Request, max_frames: int | None = None, max_motions: int = MAX_MOTIONS) -> Result:
+        """G for a checked request; every limit (the caller's `max_frames`, a GIF's, included) is
+        checked before G runs."""
         specs = [self._spec(s, req.seed) for s in req.styles]
         z = styles_lib.z_codes(self.state, req.z, req.seed)
-        if len(specs) * len(z) > MAX_MOTIONS:
+        if len(specs) * len(z) > max_motions:
             raise RequestError(f"{len(specs)} styles x {len(z)} samples = {len(specs) * len(z)} "
-                               f"motions; the demo makes at most {MAX_MOTIONS} at once")
+                               f"motions; the demo makes at most {max_motions} at once")
         notes: list[str] = []
         curve_T = user_curves.prepare_curve(user_curves.Curve(req.points, "path"), self.rate, req.speed,
                                             log=notes.append)
@@ -233,11 +288,20 @@ class Engine:
             raise RequestError(f"path: {T} samples at {speed:g} m/s ({T / self.rate:.0f} s of walking); "
                                f"the demo walks at most {SAMPLE_BUCKETS[-1]} "
                                f"({SAMPLE_BUCKETS[-1] / self.rate:.0f} s): draw a shorter path or walk faster")
+        if max_frames is not None and T > max_frames:
+            raise RequestError(f"GIF export takes at most {max_frames} frames ({max_frames / self.rate:.0f} s); "
+                               f"this walk has {T}: download the BVH or NPZ")
         w = self._spec_codes(specs, z)
         B = len(w)
         Tb, Bb = bucket(T, SAMPLE_BUCKETS), bucket(B, BATCH_BUCKETS)
         w_pad = np.concatenate([w, np.repeat(w[-1:], Bb - B, axis=0)])
+        new = (Tb, Bb) not in self.compiled()
+        t0 = time.perf_counter()
         full = walk.generate_motion(self.state, self.layout, walk.extend_straight(curve_T, Tb - T), w_pad)
+        with self._codes_lock:
+            self._compiled.add((Tb, Bb))
+            if new:  # compiled (or loaded from the persistent cache): what a first request waits
+                self._compile_times.append(time.perf_counter() - t0)
         raw = full.positions[:B, :T].copy()
         raw[..., 1] -= full.floor_shift_m[:B, None, None]
         shift = walk.floor_shift(raw)
@@ -281,28 +345,28 @@ class Engine:
                             "serialise": round(1e3 * (time.perf_counter() - t1), 2)}
         return out
 
-    def export(self, body) -> tuple[bytes, str, str]:
+    def export(self, body, run=None) -> tuple[bytes, str, str]:
         """(file bytes, file name, MIME type) of /api/export: the motion `index` as .bvh/.npz, or
-        every motion side by side as .gif, written by generate.writers.write_outputs."""
+        every motion side by side as .gif, written by generate.writers.write_outputs. The request,
+        the format, the index and the GIF's frame limit are checked before G runs; `run(fn, *args)`
+        runs the generation (the server's generation slot), the file is written outside it."""
         if not isinstance(body, dict):
             raise RequestError("the request body must be a JSON object")
         fmt = body.get("format")
         if fmt not in EXPORT_FORMATS:
             raise RequestError(f"'format' must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}"[:200])
-        res = self.run(parse_request(body))
-        g = res.generated
-        B, T = g.positions.shape[:2]
+        req = parse_request(body)
         if fmt == "gif":
-            if T > GIF_MAX_FRAMES:
-                raise RequestError(f"GIF export takes at most {GIF_MAX_FRAMES} frames "
-                                   f"({GIF_MAX_FRAMES / self.rate:.0f} s); this walk has {T}: "
-                                   "download the BVH or NPZ")
+            res = (run or _call)(self.run, req, GIF_MAX_FRAMES)
+            g = res.generated
             pick, titles, zs = g, res.titles, list(res.z_per_motion)
             name = "motiongan_" + _safe_name("_".join(res.titles)) + ".gif"
         else:
-            i = _int(body.get("index", 0), "'index'", 0, B - 1)
+            i = _int(body.get("index", 0), "'index'", 0, req.motions - 1)
+            res = (run or _call)(self.run, req)
+            g = res.generated
             pick = walk.Generated(g.positions[i:i + 1], g.root_velocity[i:i + 1], g.pose[i:i + 1],
-                                     g.curve, g.w[i:i + 1], g.floor_shift_m[i:i + 1])
+                                  g.curve, g.w[i:i + 1], g.floor_shift_m[i:i + 1])
             titles, zs = (res.titles[i],), [res.z_per_motion[i]]
             name = f"motiongan_{_safe_name(res.titles[i])}.{fmt}"
         with tempfile.TemporaryDirectory(prefix="motiongan-demo-") as tmp:
@@ -311,15 +375,30 @@ class Engine:
             return paths[0].read_bytes(), name, EXPORT_FORMATS[fmt]
 
     # -- warm-up --------------------------------------------------------------------------------
-    def warm_up(self, max_samples: int = WARM_MAX_SAMPLES, batches=(1,)) -> float:
-        """Compiles G for every sample bucket up to `max_samples` and the given batch buckets (and
-        the style codes for z = zero), so the first drawn paths do not wait; returns seconds."""
+    def warm_up(self, run=None, plan=None) -> float:
+        """Compiles G for every (sample bucket, batch bucket) of `plan` (default: warm_plan(), all
+        the page can ask for) not compiled yet, and the style codes of every z the page can ask
+        for, so that no request waits for a compile; `run(fn, *args)` runs each (the server's
+        generation slot). Returns seconds."""
         t0 = time.perf_counter()
+        run = run or _call
         name = self.style_names[0]
-        for b in batches:
-            for T in (t for t in SAMPLE_BUCKETS if t <= max_samples):
-                # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
-                pts = np.array([[0.0, 0.0], [(T - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
-                self.run(Request(pts, (name,) * b, "zero", 0, None))
+        for k in range(1, MAX_SAMPLES_Z + 1):  # the latent codes of z = K (z = zero/seed: K = 1)
+            run(self._spec_codes, [self._spec(name, 0)], styles_lib.z_codes(self.state, k, 0))
+        for T, B in plan or warm_plan():
+            if (T, B) in self.compiled():
+                continue
+            # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
+            pts = np.array([[0.0, 0.0], [(T - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
+            run(self.run, Request(pts, (name,) * B, "zero", 0, None))
         self._warm.set()
         return time.perf_counter() - t0
+
+
+def warm_plan() -> list[tuple[int, int]]:
+    """Every (sample bucket, batch bucket) the page can ask for, most wanted first: one walk of
+    ordinary length, then side by side and z samples, then long paths and 8 walks."""
+    short = [T for T in SAMPLE_BUCKETS if T <= WARM_FIRST_SAMPLES]
+    long = [T for T in SAMPLE_BUCKETS if T > WARM_FIRST_SAMPLES]
+    return ([(T, B) for B in BATCH_BUCKETS[:3] for T in short] + [(T, 1) for T in long]
+            + [(T, B) for B in BATCH_BUCKETS[1:3] for T in long] + [(T, BATCH_BUCKETS[3]) for T in short + long])

@@ -1,6 +1,10 @@
 """The demo's HTTP side (Flask): the page, its JSON API, and the `motiongan-demo` command.
 
-  motiongan-demo [--workdir RUN | --model FILE.npz] [--port 8000] [--host 127.0.0.1]
+  motiongan-demo [--workdir RUN | --model FILE.npz] [--port 8000] [--host 127.0.0.1] [--debug]
+
+Served by waitress (a production WSGI server: THREADS request threads, at most CONNECTIONS open
+connections, a connection idle or trickling for IDLE_TIMEOUT_S closed); `--debug` serves through
+Flask's development server instead, on this machine only.
 
 Routes (JSON in and out; every refusal is {"error": message} with a 4xx status):
   GET  /                 the page (static/, no file from outside this package)
@@ -10,15 +14,15 @@ Routes (JSON in and out; every refusal is {"error": message} with a 4xx status):
   POST /api/generate     {"points", "styles", "z", "seed", "speed"}: the motions (engine.py)
   POST /api/export       the same plus "format" (bvh|npz|gif) and "index": the file
 Bad input (generate.py's style and curve errors, the demo's limits) is a 400 with the message
-bin/generate.py would print; a body over MAX_BODY_BYTES is a 413. Generation runs in the request
-threads, at most MAX_CONCURRENT at once (the others wait up to QUEUE_TIMEOUT_S, then get a 503),
-so many requests cannot pile up memory.
+bin/generate.py would print; a body over MAX_BODY_BYTES is a 413 (chunked ones too). Generation
+runs in the request threads, at most MAX_CONCURRENT at once (the others wait up to QUEUE_TIMEOUT_S,
+then get a 503), so many requests cannot pile up memory; an export draws its file after giving
+its generation slot back, MAX_EXPORTS at a time (a GIF takes matplotlib seconds to draw).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import threading
 import time
@@ -27,7 +31,7 @@ from pathlib import Path
 from flask import Flask, jsonify, request, send_from_directory
 from werkzeug.exceptions import HTTPException
 
-from motiongan_jax.cli import add_model_arguments
+from motiongan_jax.cli import add_model_arguments, use_compilation_cache
 from motiongan_jax.data import curves
 from motiongan_jax.demo import engine as engine_lib
 from motiongan_jax.generate import limits
@@ -36,9 +40,14 @@ from motiongan_jax.motion.ik import IKError
 STATIC = Path(__file__).resolve().parent / "static"
 MAX_BODY_BYTES = 2 * 1024 * 1024
 MAX_CONCURRENT = 2
+MAX_EXPORTS = 1  # files drawn at once (matplotlib's GIF frames: seconds of one core each)
 QUEUE_TIMEOUT_S = 30.0
+THREADS = 8  # waitress's request threads: a few beyond the generation slots for the page's quick requests
+CONNECTIONS = 64  # open connections at most (waitress refuses more)
+IDLE_TIMEOUT_S = 30  # a connection idle (or sending nothing) this long is closed
 BAD_INPUT = (engine_lib.RequestError, limits.GenerateError, curves.DegenerateCurveError,
              curves.CurveFileError, IKError)
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 class Busy(Exception):
@@ -49,20 +58,30 @@ def create_app(engine: engine_lib.Engine) -> Flask:
     app = Flask(__name__, static_folder=None)
     app.config["MAX_CONTENT_LENGTH"] = MAX_BODY_BYTES
     slots = threading.BoundedSemaphore(MAX_CONCURRENT)
+    export_slots = threading.BoundedSemaphore(MAX_EXPORTS)
 
-    def bounded(fn, *args):
-        if not slots.acquire(timeout=QUEUE_TIMEOUT_S):
-            raise Busy()
+    def bounded(fn, *args, sem=slots, what="generations"):
+        if not sem.acquire(timeout=QUEUE_TIMEOUT_S):
+            raise Busy(what)
         try:
             return fn(*args)
         finally:
-            slots.release()
+            sem.release()
+
+    def patient(fn, *args):
+        with slots:
+            return fn(*args)
+
+    # the background warm-up compiles in a generation slot too (waiting as long as it takes), so a
+    # request waits for one compile at most
+    app.config["run_in_slot"] = patient
 
     def body():
-        data = request.get_json(silent=True)
-        if data is None:
+        if not request.is_json:
             raise engine_lib.RequestError("the request body must be JSON (Content-Type: application/json)")
-        return data
+        # read here, not by get_json(silent=True): that would turn a chunked body over the limit
+        # (RequestEntityTooLarge while reading) and a deeply nested one into other answers
+        return engine_lib.decode_json(request.get_data(cache=False))
 
     @app.errorhandler(HTTPException)
     def http_error(err):
@@ -79,9 +98,17 @@ def create_app(engine: engine_lib.Engine) -> Flask:
         app.register_error_handler(exc, bad_input)
 
     @app.errorhandler(Busy)
-    def busy(_):
-        return jsonify(error=f"the server is busy (more than {MAX_CONCURRENT} generations at once); "
+    def busy(err):
+        what = err.args[0] if err.args else "generations"
+        n = MAX_EXPORTS if what == "exports" else MAX_CONCURRENT
+        return jsonify(error=f"the server is busy (more than {n} {what} at once for {QUEUE_TIMEOUT_S:g} s); "
                              "try again"), 503
+
+    @app.errorhandler(Exception)
+    def internal(err):
+        # a bug, not bad input: logged with its traceback, answered as JSON like every refusal
+        app.logger.exception("internal error")
+        return jsonify(error=f"internal error ({type(err).__name__}); the server log has the details"), 500
 
     @app.get("/")
     def index():
@@ -107,7 +134,7 @@ def create_app(engine: engine_lib.Engine) -> Flask:
             except ValueError:
                 raise engine_lib.RequestError(f"'{key}' must be a number, got {args[key]!r}"[:200]) from None
 
-        pts = engine.shape(args.get("name"), num("length", None), num("scale", 2.0))
+        pts = engine.shape(args.get("name"), num("length", None), num("scale", None))
         return jsonify(points=pts.round(engine_lib.DIGITS).tolist())
 
     @app.post("/api/style")
@@ -126,7 +153,7 @@ def create_app(engine: engine_lib.Engine) -> Flask:
 
     @app.post("/api/export")
     def export():
-        data, name, mime = bounded(engine.export, body())
+        data, name, mime = bounded(engine.export, body(), bounded, sem=export_slots, what="exports")
         return app.response_class(data, mimetype=mime,
                                   headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
@@ -149,58 +176,76 @@ def load_engine(workdir=None, model=None, step=None, params="ema") -> engine_lib
     return engine_lib.Engine(state, meta, cfg, layout, title, details)
 
 
-def _compilation_cache() -> None:
-    """G's compiled programs persist between runs of the demo (unless the user set a cache)."""
-    import jax
+def make_server(app, host: str, port: int, debug: bool = False):
+    """A started-on-demand server for `app`: waitress (module doc), or Flask's development
+    server when `debug`. Its `.port` is the port it listens on; `.serve()` serves until `.close()`."""
+    if debug:
+        from werkzeug.serving import make_server as dev_server
 
-    if os.environ.get("JAX_COMPILATION_CACHE_DIR") or jax.config.jax_compilation_cache_dir:
-        return
-    from motiongan_jax.cache import cache_root
+        srv = dev_server(host, port, app, threaded=True)
+        return _Server(srv.server_port, srv.serve_forever, lambda: (srv.shutdown(), srv.server_close()))
+    from waitress.server import create_server
 
-    jax.config.update("jax_compilation_cache_dir", str(cache_root() / "xla"))
+    # bodies up to twice the limit reach the app, which answers its JSON 413; beyond, waitress's own 413
+    srv = create_server(app, host=host, port=port, threads=THREADS, connection_limit=CONNECTIONS,
+                        channel_timeout=IDLE_TIMEOUT_S, cleanup_interval=min(IDLE_TIMEOUT_S, 30),
+                        max_request_body_size=2 * MAX_BODY_BYTES, ident="motiongan-demo",
+                        clear_untrusted_proxy_headers=True)
+    return _Server(srv.effective_port, srv.run, srv.close)
+
+
+class _Server:
+    def __init__(self, port, serve, close):
+        self.port, self.serve, self.close = port, serve, close
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="motiongan-demo", description="Draw a path, pick a style, watch it walk.")
     add_model_arguments(ap)
     ap.add_argument("--host", default="127.0.0.1",
-                    help="address to listen on (default 127.0.0.1: this machine only)")
+                    help="address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every network)")
     ap.add_argument("--port", type=int, default=8000, help="port (default 8000; 0: any free port)")
     ap.add_argument("--no-warm-up", action="store_true", help="compile G on first use instead of at start")
+    ap.add_argument("--debug", action="store_true",
+                    help="serve through Flask's development server (this machine only) instead of waitress")
     args = ap.parse_args(argv)
     if not 0 <= args.port <= 65535:
         ap.error(f"--port must be 0..65535, got {args.port}")
-
-    from werkzeug.serving import make_server
+    if args.debug and args.host not in LOOPBACK:
+        ap.error(f"--debug serves through Flask's development server, which is for this machine only: "
+                 f"use --host 127.0.0.1, not {args.host}")
 
     from motiongan_jax.train.checkpoint import CheckpointError
 
-    _compilation_cache()
+    use_compilation_cache()
     try:
         engine = load_engine(args.workdir, args.model, args.step, args.params)
     except CheckpointError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     try:
-        server = make_server(args.host, args.port, create_app(engine), threaded=True)
-    except OSError as err:
-        print(f"error: cannot listen on {args.host}:{args.port}: {err.strerror or err}", file=sys.stderr)
+        app = create_app(engine)
+        server = make_server(app, args.host, args.port, args.debug)
+    except (OSError, ValueError) as err:  # port taken, address not ours, a host name that does not resolve
+        why = getattr(err, "strerror", None) or err
+        print(f"error: cannot listen on {args.host}:{args.port}: {why}", file=sys.stderr)
         return 2
     host = f"[{args.host}]" if ":" in args.host else args.host
     print(f"motiongan demo: {engine.details}", flush=True)
-    print(f"serving on http://{host}:{server.server_port}/  (Ctrl-C to stop)", flush=True)
+    print(f"serving on http://{host}:{server.port}/  (Ctrl-C to stop)", flush=True)
     if not args.no_warm_up:
         def warm():
-            secs = engine.warm_up()
-            print(f"warmed up in {secs:.1f} s (paths up to {engine_lib.WARM_MAX_SAMPLES} samples)", flush=True)
+            secs = engine.warm_up(run=app.config["run_in_slot"])
+            print(f"warmed up in {secs:.1f} s: every path length and number of walks the page can ask for",
+                  flush=True)
 
         threading.Thread(target=warm, daemon=True).start()
     try:
-        server.serve_forever()
+        server.serve()
     except KeyboardInterrupt:
         pass
     finally:
-        server.server_close()
+        server.close()
     return 0
 
 

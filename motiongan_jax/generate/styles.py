@@ -7,6 +7,7 @@ Style (all in w space, the Latent Transform's output, computed with one z for ev
   1 and 0 give one style's w exactly, and `Sad:1,Happy:1` is the half-way mix);
 - an expression `OldMan - Normal + Marching` (optional coefficients `0.5*Happy`): w = sum ±c_k w_k,
   as the reference's `--style_mode operation`;
+  the numbers are bounded where they are parsed (MAX_MIX_WEIGHT, MAX_COEFFICIENT_SUM, below);
 - a raw w vector: a .npy or .txt file of w_dim numbers;
 - `random`: a label drawn from the seed.
 z: `zero` (default, like the reference's inference: w = LT(0, label)), `seed` (one z ~ N(0, I)
@@ -30,6 +31,11 @@ from motiongan_jax.generate.limits import GenerateError
 from motiongan_jax.model import apply as model_apply
 
 FIGURES = ("styles", "interp", "arith")
+# The bounds on a style's numbers, the one definition for the command line, the API and the page:
+# a w far outside the styles' own drives G off its training range (1e30*Sad gave non-finite
+# positions), so a style is refused where it is parsed, not blamed on the model afterwards.
+MAX_MIX_WEIGHT = 1000.0  # |weight| of one mix entry as written, before normalising to sum 1
+MAX_COEFFICIENT_SUM = 10.0  # sum of |c| over the terms (expression coefficients or normalised weights)
 INTERP_ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 _latent_w = jax.jit(model_apply.style_codes)
 
@@ -60,7 +66,7 @@ def unknown_style_message(name: str, style_names: Sequence[str]) -> str:
     close = difflib.get_close_matches(name, list(style_names), n=1, cutoff=0.0)
     lower = {s.lower(): s for s in style_names}
     best = lower.get(name.lower()) or (close[0] if close else None)
-    hint = f"; did you mean {best!r}?" if best else ""
+    hint = f"; did you mean {best!r}?" if best and best != name else ""
     return f"unknown style {name!r}{hint} Valid styles: {', '.join(style_names)}"
 
 
@@ -78,10 +84,27 @@ def _number(text: str, what: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise StyleError(f"{what}: {text!r} is not a number") from None
+        raise StyleError(f"{what}: {text!r} is not a number"[:300]) from None
     if not math.isfinite(value):
-        raise StyleError(f"{what}: {text!r} is not a finite number")
+        raise StyleError(f"{what}: {text.strip()[:40]!r} is not a finite number")
     return value
+
+
+def bounds_text() -> str:
+    """The bounds (MAX_MIX_WEIGHT, MAX_COEFFICIENT_SUM) as every refusal states them."""
+    return (f"bounds: each mix weight within ±{MAX_MIX_WEIGHT:g}, and the sizes of the coefficients (a mix's "
+            f"weights once normalised to sum 1) add up to at most {MAX_COEFFICIENT_SUM:g}")
+
+
+def _check_terms(text: str, kind: str, terms) -> None:
+    """StyleError unless every coefficient is finite and the sizes add up to at most
+    MAX_COEFFICIENT_SUM (for a mix: its normalised weights, which weights that nearly cancel blow up)."""
+    total = math.fsum(abs(c) for _, c in terms)
+    if not math.isfinite(total) or total > MAX_COEFFICIENT_SUM:
+        shown = ", ".join(f"{n} {c:.3g}" for n, c in terms[:6]) + (", ..." if len(terms) > 6 else "")
+        why = "the weights nearly cancel, so the normalised weights are " if kind == "mix" else "coefficients "
+        raise StyleError(f"{kind} {text[:80]!r}: {why}{shown} (sizes add up to {total:.3g}); "
+                         f"{bounds_text()}")
 
 
 def _parse_mix(text: str, style_names) -> StyleSpec:
@@ -92,15 +115,19 @@ def _parse_mix(text: str, style_names) -> StyleSpec:
         if part.count(":") != 1:
             raise StyleError(f"malformed mix {text!r}: entry {part.strip()!r} is not Name:weight")
         name, weight = part.split(":")
-        terms.append((_resolve_name(name, style_names),
-                      _number(weight.strip(), f"malformed mix {text!r}: weight of {name.strip()!r}")))
+        name = _resolve_name(name, style_names)
+        a = _number(weight.strip(), f"malformed mix {text!r}: weight of {name!r}")
+        if abs(a) > MAX_MIX_WEIGHT:
+            raise StyleError(f"mix {text[:80]!r}: weight {a:g} of {name!r} is too large; {bounds_text()}")
+        terms.append((name, a))
     names = [n for n, _ in terms]
     if len(set(names)) != len(names):
         raise StyleError(f"malformed mix {text!r}: a style appears twice")
-    total = sum(a for _, a in terms)
-    if abs(total) < 1e-9:
+    total = math.fsum(a for _, a in terms)  # exact: weights of 1e-300 sum to a non-zero total
+    if total == 0:
         raise StyleError(f"malformed mix {text!r}: the weights sum to 0 (they are normalised to sum 1)")
     terms = tuple((n, a / total) for n, a in terms)
+    _check_terms(text, "mix", terms)
     return StyleSpec("mix", terms, text=",".join(f"{n}:{a:.3g}" for n, a in terms))
 
 
@@ -129,6 +156,9 @@ def _parse_expression(text: str, style_names) -> StyleSpec:
         m = _NUM_RE.match(text, i)
         if m:
             coef, i = float(m.group(1)), m.end()
+            if not math.isfinite(coef):  # digits beyond float range, e.g. 1e400
+                raise StyleError(f"expression {text[:80]!r}: coefficient {m.group(1)[:40]!r} is not a finite "
+                                 f"number; {bounds_text()}")
         i = skip(i)
         if i >= n:
             raise StyleError(f"malformed expression {text!r}: "
@@ -138,6 +168,14 @@ def _parse_expression(text: str, style_names) -> StyleSpec:
             if text[i] in "+-*":
                 raise StyleError(f"malformed expression {text!r}: expected a style name at "
                                  f"position {i + 1}, found {text[i]!r}")
+            known = _name_then_symbol(text, i, names_by_len)
+            if known is not None:  # a valid name followed by something other than + or -
+                j = skip(i + len(known))
+                if text[j] == "*":
+                    raise StyleError(f"malformed expression {text!r}: a coefficient goes before its style "
+                                     f"('2*{known}'), not after it")
+                raise StyleError(f"malformed expression {text!r}: expected + or - after {known!r} at position "
+                                 f"{j + 1}, found {text[j]!r}")
             token = re.match(r"[^\s+*,:-]+", text[i:]).group(0)
             raise StyleError(unknown_style_message(token, style_names))
         terms.append((name, sign * coef))
@@ -149,6 +187,7 @@ def _parse_expression(text: str, style_names) -> StyleSpec:
             raise StyleError(f"malformed expression {text!r}: expected + or - at position {i + 1}, "
                              f"found {text[i]!r}")
         sign, i = (-1.0 if m.group(1) == "-" else 1.0), m.end()
+    _check_terms(text, "expression", terms)
     parts = []
     for k, (nm, c) in enumerate(terms):
         op = "- " if c < 0 else ("+ " if k else "")
@@ -166,6 +205,17 @@ def _starts_name(text: str, i: int, names_by_len) -> str | None:
                 rest = text[i + len(name):].lstrip()
                 if not rest or rest[0] in "+-":
                     return name
+    return None
+
+
+def _name_then_symbol(text: str, i: int, names_by_len) -> str | None:
+    """The longest style name at text[i] (any case) followed by a symbol (not a letter, digit or
+    '_', which would make it part of another word): what `Sad*2` or `Sad/2` starts with."""
+    for name in names_by_len:
+        if text[i:i + len(name)].lower() == name.lower():
+            rest = text[i + len(name):].lstrip()
+            if rest and not (rest[0].isalnum() or rest[0] == "_"):
+                return name
     return None
 
 

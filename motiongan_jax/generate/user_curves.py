@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from pathlib import Path
 from typing import Callable
 
@@ -37,6 +38,25 @@ class Curve:
     smooth_interval: int | None = None
 
 
+def _positive(value) -> bool:
+    """Whether `value` is a finite positive real number (an int beyond float range is not)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return False
+    try:
+        return math.isfinite(float(value)) and value > 0
+    except OverflowError:
+        return False
+
+
+def check_shape_size(name: str, length, scale) -> None:
+    """GenerateError unless a shape's length (None: its natural one) and scale are finite positive
+    metres (the command line checks them before loading the model)."""
+    for what, value in (("length", length), ("scale", scale)):
+        if value is not None and not _positive(value):
+            raise limits.GenerateError(f"curve {name!r}: {what} must be a positive number of metres, "
+                                       f"got {value!r}"[:200])
+
+
 def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
                control_seconds: float | None = None) -> Curve:
     """A shape name (curves.SHAPES, with length/scale in metres), or a .csv/.txt/.json file of
@@ -46,12 +66,12 @@ def load_curve(text: str, *, length: float | None = None, scale: float = 2.0,
     read), curves.CurveFileError or curves.DegenerateCurveError."""
     text = str(text).strip()
     if text in curves.SHAPES:
+        check_shape_size(text, length, scale)
         try:
             natural = None if length is None else float(length)
             total = natural
             if total is None:
-                total = {"line": scale, "circle": 2 * math.pi * scale, "s_curve": 2 * math.pi * scale,
-                         "figure8": 4 * math.pi * scale, "corner": 2 * scale}[text]
+                total = curves.natural_length(text, scale)
             if math.isfinite(total) and total > limits.MAX_CURVE_LENGTH_M:
                 raise limits.GenerateError(limits.too_long_message(f"curve {text!r}", total))
             num = int(min(max(total * SHAPE_POINTS_PER_M, 256), limits.MAX_CURVE_POINTS))
@@ -102,10 +122,11 @@ def prepare_curve(curve: Curve | np.ndarray, sample_rate: float, speed: float | 
         curve = Curve(curves.check_curve(curve, "curve"), "curve")
     limits.check_curve_limits(curve.points, f"curve {curve.description}")
     if speed is None:
-        speed = curve.speed_m_per_s or DEFAULT_SPEED_M_PER_S
-    speed = float(speed)
-    if not (math.isfinite(speed) and speed > 0):
-        raise limits.GenerateError(f"speed must be a positive number of m/s, got {speed}")
+        speed = float(curve.speed_m_per_s or DEFAULT_SPEED_M_PER_S)
+        if not (math.isfinite(speed) and speed > 0):
+            raise limits.GenerateError(f"speed must be a positive number of m/s, got {speed}")
+    else:
+        speed = limits.check_speed(speed)
     if not (math.isfinite(sample_rate) and sample_rate > 0):
         raise limits.GenerateError(f"sample rate must be positive, got {sample_rate}")
     spacing = speed / sample_rate

@@ -215,16 +215,25 @@
     drawFloor();
   }, { passive: false });
 
-  $("undo").onclick = () => { S.strokes.pop(); changed(); drawFloor(); };
-  $("clear").onclick = () => {
-    S.strokes = []; S.result = null; S.request = null; fitFloor([]); refreshMotions(); drawFloor();
+  function clearWalk() {
+    // the walk shown belongs to a path that is gone: stop it (and any request for it)
+    if (S.inflight) { S.inflight.abort(); S.inflight = null; }
+    S.seq++;
+    S.result = null; S.request = null; refreshMotions(); setStatus("");
     $("hint").hidden = false;
+  }
+  $("undo").onclick = () => {
+    S.strokes.pop();
+    clearWalk();  // with "regenerate on change" the shorter path's walk follows at once
+    changed(true); drawFloor();
   };
+  $("clear").onclick = () => { S.strokes = []; clearWalk(); fitFloor([]); drawFloor(); };
 
   async function preset(name) {
     const length = parseFloat($("preset-length").value) || 10;
     try {
-      const r = await api(`/api/shape?name=${encodeURIComponent(name)}&length=${length}&scale=2`);
+      // no scale: the server makes one whole shape of this length (a circle of this circumference, ...)
+      const r = await api(`/api/shape?name=${encodeURIComponent(name)}&length=${length}`);
       const pts = (await r.json()).points;
       S.strokes = [pts];
       fitFloor(pts);
@@ -376,7 +385,7 @@
       points: thin.map(([x, z]) => [+x.toFixed(4), +z.toFixed(4)]),
       styles: S.panels.map(styleString),
       z: zValue(),
-      seed: Math.max(0, parseInt($("seed").value, 10) || 0),
+      seed: Math.min(2147483647, Math.max(0, parseInt($("seed").value, 10) || 0)),
       speed: parseFloat($("speed").value),
     };
   }
@@ -397,6 +406,7 @@
     const seq = ++S.seq;
     setStatus("generating…");
     const t0 = performance.now();
+    const slow = setTimeout(() => explainWait(req, seq), 700);
     try {
       const res = await (await api("/api/generate", req, ctl.signal)).json();
       if (seq !== S.seq) return;
@@ -416,8 +426,28 @@
       showError(e.message);
       setStatus("");
     } finally {
+      clearTimeout(slow);
       if (S.inflight === ctl) S.inflight = null;
     }
+  }
+
+  // A request taking long: say what it waits for (G compiling for a new path length or number of
+  // walks, which the server's background warm-up has not reached yet) and how long that takes.
+  async function explainWait(req, seq) {
+    let info;
+    try { info = await (await api("/api/model")).json(); } catch (e) { return; }
+    if (seq !== S.seq || !S.inflight) return;
+    const bucket = (n, sizes) => sizes.find((s) => n <= s) || sizes[sizes.length - 1];
+    const samples = Math.floor(polyLength(req.points) / (req.speed / info.fps)) + 1;
+    const walks = req.styles.length * (typeof req.z === "number" ? req.z : 1);
+    const T = bucket(samples, info.buckets.samples), B = bucket(walks, info.buckets.batch);
+    const ready = info.compiled.length, total = info.programs;
+    const about = info.compile_s ? `about ${Math.ceil(info.compile_s)} s` : "a few seconds";
+    const compiled = info.compiled.some(([t, b]) => t === T && b === B);
+    setStatus(compiled
+      ? `generating… waiting for the server (another generation is running)`
+      : `generating… compiling the generator for paths of ${T} samples × ${B} walk${B > 1 ? "s" : ""}, ` +
+        `once (${about}); warmed up ${ready} of ${total}`);
   }
 
   function refreshMotions() {
@@ -439,6 +469,12 @@
     if (!S.request) return;
     const btn = $("dl-" + fmt), label = btn.textContent;
     btn.disabled = true; btn.textContent = fmt === "gif" ? "drawing…" : "…";
+    if (fmt === "gif" && S.result) {
+      // matplotlib draws every frame of every panel: about 0.07 s each on one core (docs/PERFORMANCE.md)
+      const n = S.result.frames * S.result.motions.length;
+      setStatus(`drawing the GIF: ${S.result.frames} frames × ${S.result.motions.length} panel(s), ` +
+                `about ${Math.max(1, Math.round(n * 0.07))} s`);
+    }
     try {
       const r = await api("/api/export", { ...S.request, format: fmt, index: S.selected });
       const blob = await r.blob();
@@ -451,7 +487,10 @@
       setTimeout(() => URL.revokeObjectURL(a.href), 10000);
       showError(null);
     } catch (e) { showError(e.message); }
-    finally { btn.disabled = false; btn.textContent = label; }
+    finally {
+      btn.disabled = false; btn.textContent = label;
+      if (fmt === "gif") setStatus("");
+    }
   }
 
   // ------------------------------------------------------------------------------------------
