@@ -26,8 +26,9 @@ pytest.importorskip("flask")
 
 from motiongan_jax.demo import engine as E  # noqa: E402
 from motiongan_jax.demo import server  # noqa: E402
-from motiongan_jax.generate import limits, walk  # noqa: E402
+from motiongan_jax.generate import limits  # noqa: E402
 from motiongan_jax.generate import styles as styles_lib  # noqa: E402
+from motiongan_jax.model import apply as model_apply  # noqa: E402
 from motiongan_jax.train import checkpoint  # noqa: E402
 
 NAMES = ["Childish", "Drunk", "Happy", "Marching", "Normal", "OldMan", "Sad", "Sneaky", "Strong"]
@@ -50,7 +51,7 @@ def no_g(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("G ran")
 
-    monkeypatch.setattr(walk, "_apply_g", fail)
+    monkeypatch.setattr(model_apply, "g_apply", fail)
 
 
 def _style_message(text):
