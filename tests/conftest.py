@@ -71,10 +71,10 @@ def compiled_call(module, *args, **kwargs):
 # The files whose tests take longest in all (docs/TESTING.md, Durations), longest first: with
 # `--dist loadfile` (pyproject.toml) xdist hands whole files to the workers in collection order,
 # and longest-first keeps the two workers' shares even.
-SLOW_FILES = ("test_train.py", "test_multiprocess.py", "test_default_xla.py", "test_step.py", "test_fast_equals_reference.py",
-              "test_evaluation.py", "test_analysis.py", "test_notebook.py", "test_generate.py", "test_hostile.py",
-              "test_nn.py", "test_parallel.py", "test_curves.py", "test_pretrained.py", "test_losses.py",
-              "test_data.py")
+SLOW_FILES = ("test_train.py", "test_multiprocess.py", "test_default_xla.py", "test_step.py",
+              "test_fast_equals_reference.py", "test_evaluation.py", "test_analysis.py", "test_notebook.py",
+              "test_generate.py", "test_hostile.py", "test_nn.py", "test_parallel.py", "test_curves.py",
+              "test_pretrained.py", "test_losses.py", "test_data.py")
 
 
 def pytest_collection_modifyitems(config, items):
