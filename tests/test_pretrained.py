@@ -143,6 +143,9 @@ def test_a_damaged_or_edited_export_is_refused(exported, tmp_path):
         pretrained.load_export(cut)
     with pytest.raises(pretrained.ExportError, match="not found"):
         pretrained.load_export(tmp_path / "missing.npz")
+    (tmp_path / "text.npz").write_text("not a model")
+    with pytest.raises(pretrained.ExportError, match="not an .npz \\(zip\\) file"):
+        pretrained.load_export(tmp_path / "text.npz")
     np.savez(tmp_path / "other.npz", x=np.zeros(3))
     with pytest.raises(pretrained.ExportError, match="not a motiongan_jax export"):
         pretrained.load_export(tmp_path / "other.npz")

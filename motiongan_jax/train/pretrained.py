@@ -201,6 +201,8 @@ def read_export(path) -> Export:
     path = Path(path)
     if not path.is_file():
         raise ExportError(f"model file {path} not found")
+    if not zipfile.is_zipfile(path):  # numpy would take any other file for a pickle and say so
+        raise ExportError(f"model file {path} cannot be read as an export: not an .npz (zip) file")
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {name: z[name] for name in z.files}
