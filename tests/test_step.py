@@ -233,7 +233,7 @@ def test_generator_apply_paths_agree(setup):
 
 
 def test_fake_labels_and_z():
-    labels, z = objectives.sample_labels_and_z(CFG, C, 64, jax.random.key(0))
+    labels, z, _ = objectives.sample_draws(CFG, C, 64, jax.random.key(0))
     assert labels.dtype == jnp.int32 and int(labels.min()) >= 0 and int(labels.max()) < C
     assert len(set(np.asarray(labels).tolist())) == C
     assert float(jnp.std(z)) > 0.5
@@ -519,20 +519,20 @@ def _gait_step(rec_z: str):
 def _fake_labels_and_z(cfg, batch, key):
     """The labels and z the step gives G: its own style (and z = 0 if so configured) for the
     reconstructed first window."""
-    labels, z = objectives.sample_labels_and_z(cfg, C, B, key)
+    labels, z, _ = objectives.sample_draws(cfg, C, B, key)
     labels = labels.at[0].set(batch["label_B"][0])
     return labels, (z.at[0].set(0.0) if cfg.train.rec_z == "zero" else z)
 
 
 def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head():
     gait_cfg, gait = _gait_cfg()
-    assert objectives.sample_phase(CFG, B, jax.random.key(0)) is None
-    ph = objectives.sample_phase(gait_cfg, 1000, jax.random.key(0))
+    assert objectives.sample_draws(CFG, C, B, jax.random.key(0))[2] is None
+    ph = objectives.sample_draws(gait_cfg, C, 1000, jax.random.key(0))[2]
     chex.assert_shape(ph, (1000,))
     assert float(ph.min()) >= 0.0 and float(ph.max()) < 2 * np.pi and abs(float(ph.mean()) - np.pi) < 0.2
     # the offsets come from their own stream: labels and z are those of a config without them
-    assert _leaves_equal(objectives.sample_labels_and_z(gait_cfg, C, B, jax.random.key(5)),
-                         objectives.sample_labels_and_z(CFG, C, B, jax.random.key(5)))
+    assert _leaves_equal(objectives.sample_draws(gait_cfg, C, B, jax.random.key(5))[:2],
+                         objectives.sample_draws(CFG, C, B, jax.random.key(5))[:2])
     with pytest.raises(ValueError, match="need gait targets"):
         step_lib.make_train_step(gait_cfg, LAYOUT, C)
     with pytest.raises(ValueError, match="3 stride lengths for 4 styles"):
@@ -577,7 +577,7 @@ def test_reconstructed_half_at_zero_or_sampled_z_and_the_jerk_terms():
         labels, z = _fake_labels_and_z(cfg, batch, GAIT_KEY)
         g = model_apply.generator(state0)
         w = g.style(labels, z)
-        offset = objectives.sample_phase(cfg, B, GAIT_KEY)
+        offset = objectives.sample_draws(cfg, C, B, GAIT_KEY)[2]
         phase_BxT = g.walked_phase(curve_vel, w, offset).at[0].set(batch["phase_BxT"][0])
         root_vel, pose = g(curve_vel, w, offset, phase_BxT)
         want_rec = losses.reconstruction_loss(root_vel[:1], pose[:1], real_vel[:1], batch["pose_BxTxR"][:1],
@@ -624,3 +624,23 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
     # a state and a step that disagree about the average are refused at trace time
     with pytest.raises(ValueError, match="g_ema_decay"):
         jax.eval_shape(step_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))
+
+
+def test_phase_offsets_are_not_a_function_of_z():
+    """Each draw of the step has its own key: over many step keys, the first window's phase offset
+    and the first entry of z are independent (a shared key makes the offset a monotone function of
+    z: rank correlation 1). The same for the D probe's draws."""
+    import scipy.stats
+
+    gait_cfg, _ = _gait_cfg()
+    keys = jax.random.split(jax.random.key(11), 200)
+    draws = [objectives.sample_draws(gait_cfg, C, B, k) for k in keys]
+    phase0 = np.array([float(d[2][0]) for d in draws])
+    for b in range(B):  # every window's offset against window 0's z
+        rho = scipy.stats.spearmanr(phase0, [float(d[1][0, b]) for d in draws])[0]
+        assert abs(rho) < 0.25, (b, rho)
+    # what a shared key gives (the check above would fail on it): z from split(key)[1], the
+    # offsets from fold_in(key, 1), the same key under JAX's threefry
+    shared = [(jax.random.normal(jax.random.split(k)[1], (B, 8))[0, 0],
+               jax.random.uniform(jax.random.fold_in(k, 1), (B,))[0]) for k in keys[:50]]
+    assert scipy.stats.spearmanr(*np.array(shared, np.float64).T)[0] > 0.99

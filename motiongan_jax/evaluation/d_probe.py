@@ -38,8 +38,9 @@ def discriminator_probe(state, batch: dict, key) -> dict:
     floating = vel.copy()
     floating[:, 1:, 1] += PROBE_FLOAT_M / (T - 1)
     floating[:, 0, 1] = floating[:, 1, 1]
-    z = jax.random.normal(key, (B, model_apply.z_dim(state)), jnp.float32)
-    offset = (jax.random.uniform(jax.random.fold_in(key, 1), (B,), jnp.float32, 0.0, 2 * np.pi)
+    k_z, k_phase = jax.random.split(key)  # each key used once: the offsets are not a function of z
+    z = jax.random.normal(k_z, (B, model_apply.z_dim(state)), jnp.float32)
+    offset = (jax.random.uniform(k_phase, (B,), jnp.float32, 0.0, 2 * np.pi)
               if model_apply.has_gait_phase(state) else None)
     w = model_apply.style_codes(state, jnp.asarray(labels), z)
     curve_vel = trajectory.velocity(jnp.asarray(batch["curve_BxTx3"]))

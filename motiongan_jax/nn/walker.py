@@ -21,7 +21,7 @@ root height, output prior, exact bones and the curve frame on the way out. docs/
   stretches, so a convolutional G has nothing to hang a gait cycle on. With the option G keeps
   a clock in walked distance, φ[t] = φ0 + 2π s[t] / λ(w) (`walked_phase`), λ(w) the style's
   stride length from `stride_head` (trained on strides measured on real clips,
-  `losses.stride_loss`), φ0 random per training sample (`train.objectives.sample_phase`), 0 at generation.
+  `losses.stride_loss`), φ0 random per training sample (`train.objectives.sample_draws`), 0 at generation.
   sin and cos of φ and 2φ (`gait_phase`) enter ec0_0, the skips e1 and e2 and dc1_0's input.
   A clock in distance stays right under the FPS augmentation.
 * Root height (model.root_height): the root head's y channel is the root's height (up to a

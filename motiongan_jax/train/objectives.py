@@ -97,9 +97,7 @@ def generator_inputs(cfg, num_styles: int, batch: dict, key) -> tuple[jax.Array,
     """(labels_B, z_BxZ, phase_offset_B) the step gives G: labels, z and gait-phase offsets drawn
     from `key`; the rows `batch["rec_B"]` marks take their window's own style (and z = 0 under
     train.rec_z = "zero"), so that G reconstructs them (at their measured phase: the step)."""
-    b = batch["curve_BxTx3"].shape[0]
-    labels, z = sample_labels_and_z(cfg, num_styles, b, key)
-    phase = sample_phase(cfg, b, key)
+    labels, z, phase = sample_draws(cfg, num_styles, batch["curve_BxTx3"].shape[0], key)
     if cfg.train.w_g_rec:
         rec_B = batch["rec_B"]
         labels = jnp.where(rec_B, batch["label_B"], labels)
@@ -108,16 +106,14 @@ def generator_inputs(cfg, num_styles: int, batch: dict, key) -> tuple[jax.Array,
     return labels, z, phase
 
 
-def sample_labels_and_z(cfg, num_styles: int, batch: int, key) -> tuple[jax.Array, jax.Array]:
-    """Fake labels ŷ ~ U{0..C-1} and z ~ N(0, I)."""
-    k_label, k_z = jax.random.split(key)
+def sample_draws(cfg, num_styles: int, batch: int, key) -> tuple[jax.Array, jax.Array, jax.Array | None]:
+    """(labels_B, z_BxZ, phase_offset_B): fake labels ŷ ~ U{0..C-1}, z ~ N(0, I) and, for a G with
+    a gait clock, phase offsets φ0 ~ U[0, 2π) (else None), from one split of `key`, each part
+    used once. (Under JAX's partitionable threefry the first two parts of split(key, 3) are those
+    of split(key), so labels and z are what they were before the phase had its own key.)"""
+    k_label, k_z, k_phase = jax.random.split(key, 3)
     labels = jax.random.randint(k_label, (batch,), 0, num_styles, dtype=jnp.int32)
-    return labels, jax.random.normal(k_z, (batch, cfg.model.z_dim), jnp.float32)
-
-
-def sample_phase(cfg, batch: int, key) -> jax.Array | None:
-    """Gait-phase offsets φ0 ~ U[0, 2π) (B,) for a G with model.gait_phase; else None. Drawn from
-    fold_in(key, 1) so that the labels and z of configs without it stay as they were."""
+    z = jax.random.normal(k_z, (batch, cfg.model.z_dim), jnp.float32)
     if not cfg.model.gait_phase:
-        return None
-    return jax.random.uniform(jax.random.fold_in(key, 1), (batch,), jnp.float32, 0.0, 2 * jnp.pi)
+        return labels, z, None
+    return labels, z, jax.random.uniform(k_phase, (batch,), jnp.float32, 0.0, 2 * jnp.pi)
