@@ -42,7 +42,7 @@ def init_state(cfg, layout, num_styles: int, key: jax.Array, *, impl: str | None
     """Fresh G, D, spectral-norm vectors and both Adam states; step 0. `impl` (see `conv_impl`)
     only chooses how the convolutions are computed: same parameters, same results; `dtype` (see
     `compute_dtype`) the activations' dtype. Both live in the graph definitions, so the step and
-    `generator_apply` follow them; parameters and optimizer state are float32 either way."""
+    `model.apply` follow them; parameters and optimizer state are float32 either way."""
     k_g, k_d = jax.random.split(key)
     g_def, g_params = build.init_generator(cfg, layout, num_styles, k_g, impl=impl, dtype=dtype)
     d_def, d_params, d_sn = build.init_discriminator(cfg, layout, num_styles, k_d, impl=impl, dtype=dtype)
