@@ -131,3 +131,24 @@ def test_bad_input(shipped, w):
     with pytest.raises(stream.StreamError, match="style code"):
         wk.set_style(np.zeros(3))
     assert len(wk.advance().curve) == 0  # nothing known ahead yet: nothing to emit
+
+
+def test_revised_path_turns_the_walker(shipped, w):
+    """A steering client revises the predicted path ahead: the walker turns at once and follows."""
+    state, layout, rate = shipped
+    wk = stream.Walker(state, layout, w[0], rate)
+    wk.feed_steps([[1.0, 0.0]] * 64, [1.2] * 64)
+    for _ in range(4):
+        wk.advance(8)
+    turned = wk.emitted
+    here = wk._points[wk.emitted - 1 - wk._base, [0, 2]]
+    ahead = here + np.outer(np.arange(1, 65), [0.0, 1.2 / rate])  # now straight along +z
+    wk.revise_ahead(ahead)
+    outs = [wk.advance(8) for _ in range(4)]
+    assert outs[0].index0 == turned
+    root = np.concatenate([o.positions[:, 0] for o in outs])
+    d = root[-1, [0, 2]] - root[-9, [0, 2]]  # heading over the last second
+    assert d[1] > 3 * abs(d[0]), d  # walking along +z within 2 s of the turn
+    with pytest.raises(stream.StreamError, match="finite"):
+        wk.revise_ahead([[np.nan, 0.0]])
+    assert len(wk._points) > 1  # a refused revision keeps the path

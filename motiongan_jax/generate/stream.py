@@ -2,7 +2,8 @@
 
 A `Walker` holds a model, a style code w, the path walked so far and the gait state. `feed_steps`
 (a floor direction and a speed per sample) or `feed_points` (floor points, one per sample) append
-the path ahead; `advance(n)` returns the next n motion samples, continuous with the ones before.
+the path ahead, `revise_ahead` replaces the part not yet walked (a steering client's prediction
+of the path from its current input); `advance(n)` returns the next n motion samples, continuous with the ones before.
 
 How. Every advance runs G once on a window of `window` samples of the path (one compiled shape
 per walker configuration): `history` samples already walked, the n new ones, and the path ahead,
@@ -168,6 +169,20 @@ class Walker:
                 self._last_dir = d / np.linalg.norm(d)
                 self._last_speed = float(np.linalg.norm(d)) * self.rate
         self._points = np.concatenate([self._points, np.stack([pts[:, 0], np.zeros(len(pts)), pts[:, 1]], 1)])
+
+    def revise_ahead(self, points_Nx2) -> None:
+        """Replaces the path not yet walked (from the next sample to emit) by these floor points,
+        one per sample: a steering client feeds the path it predicts from the current input and
+        revises it when the input changes, so a turn reaches G at the next advance instead of
+        `lookahead` samples later. The walked samples, root and phase are kept."""
+        keep = max(self.emitted, 1) - self._base
+        old = self._points
+        self._points = old[:keep]
+        try:
+            self.feed_points(points_Nx2)
+        except StreamError:
+            self._points = old
+            raise
 
     def feed_steps(self, directions_Nx2, speeds_N) -> None:
         """Appends one sample per (direction (x, z), speed m/s): the path moves speed / rate
