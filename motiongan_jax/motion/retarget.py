@@ -18,10 +18,11 @@ matter):
    construction: bone lengths are the rig's.
 4. Floor and feet. The walk is lifted so that its lowest matched joint is on the floor as at rest
    (the 5th percentile over frames, as `generate.walk` does). Where a source foot is planted
-   (toe low and slow: `contacts`), the rig's ankle is pinned to its mean position over that
-   stance (blended in and out over `PIN_BLEND` frames) and each leg is solved again by two-bone IK
-   in the plane of its knee, so a rig with other proportions does not slide its feet; an ankle out
-   of the leg's reach goes as far as the straightened leg allows.
+   (toe low and slow: `contacts`), the rig's contact point (the ball of its foot, or its ankle if
+   no toe is matched) is pinned to its mean floor position over that stance (the correction faded in
+   and out over `PIN_BLEND` frames), the ankle moved with it, and each leg is solved again by two-bone IK in the
+   plane of its knee, so a rig with other proportions does not slide its feet; an ankle out of the
+   leg's reach goes as far as the straightened leg allows.
 `foot_report` measures the foot skate and the floor penetration, the same way for the source and
 the retargeted walk, for the notes that generate.py prints.
 """
@@ -123,21 +124,24 @@ def _stances(mask_F: np.ndarray) -> list[tuple[int, int]]:
     return out
 
 
-def pin_feet(ankle_Fx3, planted_F) -> np.ndarray:
-    """Ankle goals: each stance's mean position held over the stance, faded in and out over
-    PIN_BLEND frames either side; the ankle's own path elsewhere."""
-    ankle = np.asarray(ankle_Fx3, np.float64)
-    goal = ankle.copy()
-    weight = np.zeros(len(ankle))
-    target = ankle.copy()
+def pin_feet(point_Fx3, planted_F) -> np.ndarray:
+    """Goals for a contact point: on the floor (x, z), each stance's mean position held over the
+    stance; the correction this makes at the stance's first (last) frame fades out linearly over
+    PIN_BLEND frames before (after) it, so the swing keeps its own motion; the point's own path
+    elsewhere. Heights stay the point's own (a foot rolling over its ball lifts it a little)."""
+    point = np.asarray(point_Fx3, np.float64)
+    goal = point.copy()
+    weight = np.zeros(len(point))
     for a, b in _stances(planted_F):
-        mean = ankle[a:b].mean(axis=0)
-        lo, hi = max(0, a - PIN_BLEND), min(len(ankle), b + PIN_BLEND)
-        for f in range(lo, hi):
-            w = 1.0 if a <= f < b else 1.0 - (a - f if f < a else f - b + 1) / (PIN_BLEND + 1)
-            if w > weight[f]:
-                weight[f], target[f] = w, mean
-    goal = (1 - weight[:, None]) * ankle + weight[:, None] * target
+        mean = point[a:b].mean(axis=0) * np.array([1.0, 0.0, 1.0])
+        goal[a:b] = mean + point[a:b] * np.array([0.0, 1.0, 0.0])
+        weight[a:b] = 1.0
+        for edge, frames in ((a, range(a - 1, a - 1 - PIN_BLEND, -1)), (b - 1, range(b, b + PIN_BLEND))):
+            for i, f in enumerate(frames):
+                w = 1.0 - (i + 1) / (PIN_BLEND + 1)
+                if 0 <= f < len(point) and w > weight[f]:
+                    weight[f] = w
+                    goal[f] = point[f] + w * (mean - point[edge]) * np.array([1.0, 0.0, 1.0])
     return goal
 
 
@@ -229,15 +233,17 @@ def retarget(positions_m, joint_names, parents, rest_offsets_m, rig: rigs.Rig, f
     lift = clearance - np.percentile(X[..., 1].min(axis=1), FLOOR_PERCENTILE)
     pelvis = pelvis + np.array([0.0, lift, 0.0])
     X[..., 1] += lift
-    # feet: pin the rig's ankles where the source's feet are planted, legs by two-bone IK
+    # feet: pin the rig's feet where the source's are planted, legs by two-bone IK
     for side in ("left", "right"):
         foot_src = src.get(f"{side}_toe", src[f"{side}_ankle"])
-        both = pos[:, [foot_src, foot_src]]
-        planted = contacts(both, fps)[:, 0]
+        planted = contacts(pos[:, [foot_src, foot_src]], fps)[:, 0]
         h, k, a = (slot[rig.roles[f"{side}_{r}"]] for r in ("hip", "knee", "ankle"))
         if parent_m[k] != h or parent_m[a] != k:
             continue
-        goal = pin_feet(X[:, a], planted)
+        # the contact point (the ball of the foot where both have one): pinned, the ankle moved with it
+        toe_role = f"{side}_toe"
+        c = slot[rig.roles[toe_role]] if toe_role in matched else a
+        goal = X[:, a] + pin_feet(X[:, c], planted) - X[:, c]
         knee, ankle = two_bone(X[:, h], X[:, k], goal, np.linalg.norm(rest_vec[k]), np.linalg.norm(rest_vec[a]))
         directions[:, k] = ik._unit(knee - X[:, h])[0]
         directions[:, a] = ik._unit(ankle - knee)[0]
@@ -268,10 +274,11 @@ def retarget(positions_m, joint_names, parents, rest_offsets_m, rig: rigs.Rig, f
     from motiongan_jax.motion import kinematics
 
     world = kinematics.world_positions(motion) * rig.units_to_m
+    body = [j for j in range(J) if j == joints[0] or rigs.descends(sk.parents, j, joints[0])]  # not a floor root
     feet_t = [rig.roles.get(f"{s}_toe", rig.roles[f"{s}_ankle"]) for s in ("left", "right")]
     feet_s = [src.get(f"{s}_toe", src[f"{s}_ankle"]) for s in ("left", "right")]
     report = {"source": foot_report(pos[:, feet_s], pos, fps),
-              "retargeted": foot_report(world[:, feet_t], world, fps), "matched": len(matched),
+              "retargeted": foot_report(world[:, feet_t], world[:, body], fps), "matched": len(matched),
               "unmatched": [n for j, n in enumerate(sk.names) if sk.channels[j] and j not in slot],
               "height_scale": float(scale)}
     return Retargeted(motion, world, tuple(matched), report)

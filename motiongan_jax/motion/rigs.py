@@ -211,7 +211,7 @@ def resolve_roles(skeleton: bvh.Skeleton, user_map: dict | None = None, where: s
                        f"(best built-in map: {map_name}; joints: {', '.join(names[:40])}"
                        f"{', ...' if len(names) > 40 else ''}); name them in a JSON map (--rig-map)")
     pelvis = roles["pelvis"]
-    outside = [r for r, j in roles.items() if j != pelvis and not _descends(skeleton.parents, j, pelvis)]
+    outside = [r for r, j in roles.items() if j != pelvis and not descends(skeleton.parents, j, pelvis)]
     for r in outside:
         if r in REQUIRED:
             raise RigError(f"{where}: the {_describe(r)} ({names[roles[r]]}) is not below the pelvis "
@@ -220,7 +220,7 @@ def resolve_roles(skeleton: bvh.Skeleton, user_map: dict | None = None, where: s
     return map_name, roles
 
 
-def _descends(parents, j: int, ancestor: int) -> bool:
+def descends(parents, j: int, ancestor: int) -> bool:
     while j >= 0:
         j = parents[j]
         if j == ancestor:
