@@ -178,3 +178,28 @@ def test_cli_writes_a_valid_character_and_a_retargeted_one(random_tiny, tmp_path
     gl, _ = load(tmp_path / "walk.gltf")
     assert [a.name for a in gl.animations] == ["Happy z0", "Happy z1"]
     assert_valid(tmp_path / "walk.gltf", tmp_path / "smpl.glb")
+
+
+def test_preview_gif_frames_the_body(walk, tmp_path):
+    """The GIF shows the skinned body large (most of the frame's height), the floor's grid and the
+    path; the same writer draws stick figures with body=False."""
+    from PIL import Image
+
+    from motiongan_jax.generate.walk import Generated
+
+    pos, layout, _ = walk
+    T = 6
+    gen = Generated(pos[None, :T], None, None, pos[:T, 0] * np.array([1.0, 0.0, 1.0]), np.zeros((1, 4)), np.zeros(1))
+    path = writers.write_outputs(tmp_path / "walk.gif", gen, ["toy"], layout, FPS)[0]
+    with Image.open(path) as im:
+        assert im.n_frames == T
+        im.seek(T // 2)
+        rgb = np.asarray(im.convert("RGB"), np.int32)
+    H = rgb.shape[0]
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    body = (np.abs(r - g) < 60) & (rgb.max(-1) < 200) & (rgb.max(-1) > 40)  # shaded skin and tints, not white
+    rows = np.flatnonzero(body.sum(axis=1) > 2)
+    assert rows[-1] - rows[0] > 0.55 * H, (rows[0], rows[-1], H)
+    assert ((r > 200) & (g < 80) & (b < 80)).sum() > 10  # the red path on the floor
+    sticks = writers.write_outputs(tmp_path / "sticks.gif", gen, ["toy"], layout, FPS, body=False)[0]
+    assert sticks.read_bytes() != path.read_bytes()

@@ -18,7 +18,9 @@
 - with a rig (motion.rigs.Rig, `--rig`): .bvh and .glb/.gltf hold the walk retargeted onto the rig's
   skeleton (motion.retarget), the .bvh in the rig's own units; `log` gets the matched joints and
   the foot skate and floor penetration beside the model's skeleton's.
-- .gif (Pillow) / .mp4 (ffmpeg or imageio-ffmpeg): a chase-camera animation (viz.animate_motions).
+- .gif (Pillow) / .mp4 (ffmpeg or imageio-ffmpeg): a chase-camera animation (viz.animate_motions) of
+  the skinned body (a coarse one, body_mesh.PREVIEW), filling most of the frame, the camera behind
+  the walker's side, the floor's grid and the path around it; `body=False`: stick figures.
 - .png: stroboscopic strips (viz.pose_strips), the form of the paper's Figs. 4, 6 and 7.
 """
 
@@ -34,7 +36,7 @@ import numpy as np
 from motiongan_jax import atomic
 from motiongan_jax.generate import limits
 from motiongan_jax.generate.walk import Generated
-from motiongan_jax.motion import bvh, gltf, ik, retarget
+from motiongan_jax.motion import body_mesh, bvh, gltf, ik, kinematics, representation, retarget, rigs
 
 OUTPUT_SUFFIXES = (".bvh", ".glb", ".gltf", ".npz", ".gif", ".mp4", ".png")
 ONE_FILE = (".glb", ".gltf", ".gif", ".mp4", ".png")  # every motion in one file
@@ -183,9 +185,37 @@ def save_gltf(path, gen: Generated, titles: Sequence[str], layout, fps: float, *
     return gltf.write_gltf(path, skeleton, units, motions, titles, gltf.body_for(skeleton, units))
 
 
+def preview_body(positions_TxJx3, layout, fps: float):
+    """(triangles, face colours, frame -> vertices) of the body walking `positions` for
+    viz.animate_motions: the coarse body (body_mesh.PREVIEW) on the exact hierarchy (every bone
+    where G put it), skinned one frame at a time; limbs tinted by side like the bones."""
+    from motiongan_jax import viz
+
+    motion, _ = to_bvh_motion(positions_TxJx3, layout, fps, "m", None, "exact")
+    body = gltf.body_for(motion.skeleton, 1.0, **body_mesh.PREVIEW)
+    rest = rigs.rest_world(motion.skeleton)
+    R, P = kinematics.world_transforms(motion)
+    side = [representation.joint_side(n) for n in motion.skeleton.names]
+    tint = {"left": matplotlib_rgb(viz.LEFT_COLOR), "right": matplotlib_rgb(viz.RIGHT_COLOR)}
+    skin_rgb = np.array(gltf.BODY_COLOR[:3])
+    owner = body.joints[body.triangles[:, 0], 0]
+    base = np.array([0.7 * skin_rgb + 0.3 * tint[side[j]] if side[j] in tint else skin_rgb for j in owner])
+
+    def vertices_at(t: int):
+        return body_mesh.skin(body, rest, R[t:t + 1], P[t:t + 1])[0]
+
+    return body.triangles, base, vertices_at
+
+
+def matplotlib_rgb(color) -> np.ndarray:
+    from matplotlib.colors import to_rgb
+
+    return np.array(to_rgb(color))
+
+
 def write_outputs(out, gen: Generated, titles: Sequence[str], layout, fps: float, *,
                   bvh_units: str = "m", bvh_hierarchy: str = "source", z_per_motion=None,
-                  log: Callable[[str], None] | None = None, rig=None) -> list[Path]:
+                  log: Callable[[str], None] | None = None, rig=None, body: bool = True) -> list[Path]:
     """Writes every motion of `gen` to `out` by its suffix (module doc); returns the paths.
     `bvh_hierarchy` (ik.HIERARCHIES) is the skeleton of .bvh and glTF files and of .npz's
     positions_skeleton; `rig` (motion.rigs.Rig) retargets .bvh and glTF output onto another
@@ -213,7 +243,8 @@ def write_outputs(out, gen: Generated, titles: Sequence[str], layout, fps: float
                          None if z_per_motion is None else z_per_motion[i], log, bvh_hierarchy)
         elif suffix in (".gif", ".mp4"):
             viz.animate_motions(list(gen.positions), parents, list(titles), out, fps=fps,
-                                curves=[gen.curve] * B, joint_names=layout.joint_names)
+                                curves=[gen.curve] * B, joint_names=layout.joint_names,
+                                bodies=[preview_body(p, layout, fps) for p in gen.positions] if body else None)
         else:
             viz.pose_strips(list(gen.positions), parents, list(titles), out, curves=[gen.curve] * B)
     except RuntimeError as e:  # e.g. ffmpeg vanished between the check and the write

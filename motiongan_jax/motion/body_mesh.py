@@ -56,30 +56,31 @@ def _basis(e):
     return n1, np.cross(e, n1)
 
 
-def capsule(a, b, r0: float, r1: float):
+def capsule(a, b, r0: float, r1: float, segments: int = SEGMENTS, cap_rings: int = CAP_RINGS,
+            shaft_rings=SHAFT_RINGS):
     """(vertices (V, 3), triangles (N, 3), axial position of each vertex along a -> b in metres)."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     L = float(np.linalg.norm(b - a))
     e = (b - a) / L
     n1, n2 = _basis(e)
     rings = []  # (axial, radius)
-    for k in range(1, CAP_RINGS + 1):
-        t = 0.5 * np.pi * k / CAP_RINGS
+    for k in range(1, cap_rings + 1):
+        t = 0.5 * np.pi * k / cap_rings
         rings.append((-r0 * np.cos(t), r0 * np.sin(t)))
-    rings += [(f * L, r0 + (r1 - r0) * f) for f in SHAFT_RINGS]
-    for k in range(CAP_RINGS, 0, -1):
-        t = 0.5 * np.pi * k / CAP_RINGS
+    rings += [(f * L, r0 + (r1 - r0) * f) for f in shaft_rings]
+    for k in range(cap_rings, 0, -1):
+        t = 0.5 * np.pi * k / cap_rings
         rings.append((L + r1 * np.cos(t), r1 * np.sin(t)))
-    phi = 2 * np.pi * np.arange(SEGMENTS) / SEGMENTS
+    phi = 2 * np.pi * np.arange(segments) / segments
     radial = np.cos(phi)[:, None] * n1 + np.sin(phi)[:, None] * n2  # (S, 3)
     verts = [a - r0 * e]
     axial = [-r0]
     for x, r in rings:
         verts.extend(a + x * e + r * radial)
-        axial.extend([x] * SEGMENTS)
+        axial.extend([x] * segments)
     verts.append(b + r1 * e)
     axial.append(L + r1)
-    R, S = len(rings), SEGMENTS
+    R, S = len(rings), segments
     tris = []
     ring = lambda i, k: 1 + i * S + k % S  # noqa: E731
     for k in range(S):
@@ -114,9 +115,13 @@ def _smoothstep(x):
     return x * x * (3 - 2 * x)
 
 
-def body_mesh(parents, rest_world_m, roles: dict[int, str], pelvis: int) -> Body:
+PREVIEW = dict(segments=7, cap_rings=1, shaft_rings=(0.5,))  # a coarse body for matplotlib's previews
+
+
+def body_mesh(parents, rest_world_m, roles: dict[int, str], pelvis: int, **detail) -> Body:
     """The body of a skeleton (module doc). parents: per joint (-1 root); rest_world_m (J, 3): rest
-    positions in metres; roles: joint -> role (rigs.ROLES); pelvis: the joint the body starts at."""
+    positions in metres; roles: joint -> role (rigs.ROLES); pelvis: the joint the body starts at;
+    `detail`: capsule() keywords (`PREVIEW`: fewer triangles)."""
     rest = np.asarray(rest_world_m, np.float64)
     J = len(parents)
     height = rest[pelvis, 1] - rest[:, 1].min()
@@ -150,7 +155,7 @@ def body_mesh(parents, rest_world_m, roles: dict[int, str], pelvis: int) -> Body
             r0, r1 = (height * r for r in _RADII[key])
         else:
             r0 = r1 = min(_DEFAULT * height, 0.15 * L)
-        verts, tris, x = capsule(a, b, r0, r1)
+        verts, tris, x = capsule(a, b, r0, r1, **detail)
         ji = np.zeros((len(verts), 4), np.int64)
         wt = np.zeros((len(verts), 4))
         ji[:, 0], wt[:, 0] = p, 1.0

@@ -40,7 +40,7 @@ class GLTFError(ValueError):
     """Motions that cannot be written as one glTF file; the message says why."""
 
 
-def body_for(skeleton: bvh.Skeleton, units_to_m: float) -> body_mesh.Body:
+def body_for(skeleton: bvh.Skeleton, units_to_m: float, **detail) -> body_mesh.Body:
     """The project's body for a skeleton (body_mesh.body_mesh), its roles from the built-in name maps
     (bones without a role get thin capsules); the pelvis is the joint of that role, else the first
     joint with several children."""
@@ -51,7 +51,7 @@ def body_for(skeleton: bvh.Skeleton, units_to_m: float) -> body_mesh.Body:
     if pelvis is None:
         pelvis = representation.representation_root(skeleton)
     rest = rigs.rest_world(skeleton) * units_to_m
-    return body_mesh.body_mesh(skeleton.parents, rest, {j: r for r, j in roles.items()}, pelvis)
+    return body_mesh.body_mesh(skeleton.parents, rest, {j: r for r, j in roles.items()}, pelvis, **detail)
 
 
 def _quaternions(rot_Fx3x3: np.ndarray) -> np.ndarray:

@@ -495,10 +495,10 @@
     const btn = $("dl-" + fmt), label = btn.textContent;
     btn.disabled = true; btn.textContent = fmt === "gif" ? "drawing…" : "…";
     if (fmt === "gif" && S.result) {
-      // matplotlib draws every frame of every panel: about 0.07 s each on one core (docs/PERFORMANCE.md)
+      // matplotlib draws every frame of every panel, the shaded body: about 0.15 s each on one core
       const n = S.result.frames * S.result.motions.length;
       setStatus(`drawing the GIF: ${S.result.frames} frames × ${S.result.motions.length} panel(s), ` +
-                `about ${Math.max(1, Math.round(n * 0.07))} s`);
+                `about ${Math.max(1, Math.round(n * 0.15))} s`);
     }
     try {
       const body = { ...S.request, format: fmt, index: S.selected };
