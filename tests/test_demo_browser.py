@@ -84,6 +84,16 @@ def _bone_pixels(png: bytes) -> int:
     return int(sum(n.sum() for n in near))
 
 
+def _open(browser, demo_url):
+    """(page, the page's uncaught errors) of the demo, loaded: its style chips are there."""
+    page = browser.new_page(viewport={"width": 1280, "height": 860}, accept_downloads=True)
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(demo_url)
+    page.wait_for_selector("#mode-label .chip")
+    return page, errors
+
+
 def _wait_generated(page, previous: int, timeout=300_000):  # the first one compiles G
     page.wait_for_function(f"window.demo.state.seq > {previous} && !window.demo.state.inflight", timeout=timeout)
 
@@ -93,11 +103,7 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
     with playwright_api() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1280, "height": 860}, accept_downloads=True)
-            errors = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(demo_url)
-            page.wait_for_selector("#mode-label .chip")
+            page, errors = _open(browser, demo_url)
             assert page.locator("#mode-label .chip").all_inner_texts() == names
             page.locator("#auto").uncheck()
             page.select_option("#look", "stick")  # the stick figure's bone colours (the character: below)
@@ -203,11 +209,7 @@ def test_the_character_is_the_glb_and_the_rig_picker_changes_it(playwright_api, 
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS + ["--use-angle=swiftshader",
                                                                            "--enable-unsafe-swiftshader"])
         try:
-            page = browser.new_page(viewport={"width": 1280, "height": 860}, accept_downloads=True)
-            errors = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(demo_url)
-            page.wait_for_selector("#mode-label .chip")
+            page, errors = _open(browser, demo_url)
             page.wait_for_function("window.demoCharacter !== undefined")
             assert page.evaluate("window.demoCharacter && window.demoCharacter.version") == "187", \
                 page.evaluate("window.demoCharacterError || null")
