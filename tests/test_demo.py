@@ -167,6 +167,7 @@ def _style_error(text, names):
     ({"speed": 0.0}, 400, "0.3..3 m/s"),
     ({"speed": "fast"}, 400, "must be a number"),
     ({"colour": "red"}, 400, "unknown field"),
+    ({"rig": ["mixamo"]}, 400, "'rig' must be one of mixamo, smpl, bandai"),
     ({"styles": ["Happy"] * 3, "z": 3}, 400, "at most 8 at once"),
 ])
 def test_bad_requests_are_400s_naming_the_problem(client, engine, change, status, match):

@@ -178,7 +178,7 @@ def parse_request(body) -> Request:
         if not lo <= speed <= hi:
             raise RequestError(f"'speed' must be {lo:g}..{hi:g} m/s, got {speed:g}")
     rig = body.get("rig", None)
-    if rig is not None and rig not in rigs.BUILTIN_RIGS:
+    if rig is not None and (not isinstance(rig, str) or rig not in rigs.BUILTIN_RIGS):
         raise RequestError(f"'rig' must be one of {', '.join(rigs.BUILTIN_RIGS)} (or absent: the model's "
                            f"skeleton), got {rig!r}"[:200])
     return Request(points, tuple(styles), z, seed, speed, rig)
