@@ -106,7 +106,9 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
             page, errors = _open(browser, demo_url)
             assert page.locator("#mode-label .chip").all_inner_texts() == names
             page.locator("#auto").uncheck()
-            page.select_option("#look", "stick")  # the stick figure's bone colours (the character: below)
+            # the stick figure's bone colours (the character: below); set whether or not three.js loaded
+            page.evaluate("(() => { const e = document.getElementById('look'); e.value = 'stick'; "
+                          "e.dispatchEvent(new Event('change')); })()")
             empty = _bone_pixels(page.locator("#view").screenshot())
 
             # draw a wave on the floor canvas (300 px = 16 m: 3.2 m across, under 4.4 m long)
