@@ -96,8 +96,32 @@ def _bone_colors(parents, joint_names) -> list[str]:
     return [side.get(joint_side(joint_names[c]), "0.25") for _, c in _bones(parents)]
 
 
+def _shade(tri_NxKx3: np.ndarray, base_Nx3: np.ndarray) -> np.ndarray:
+    """RGBA face colours: `base` lit by a light from above and behind the camera's side (Lambert,
+    with an ambient floor), from the faces' normals (data axes x, y up, z)."""
+    n = np.cross(tri_NxKx3[:, 1] - tri_NxKx3[:, 0], tri_NxKx3[:, 2] - tri_NxKx3[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    light = np.array([0.35, 0.85, 0.4]) / np.linalg.norm([0.35, 0.85, 0.4])
+    k = 0.38 + 0.62 * np.clip(n @ light, 0.0, 1.0)
+    return np.concatenate([np.clip(base_Nx3 * k[:, None], 0, 1), np.ones((len(k), 1))], axis=1)
+
+
+def _follow_azimuth(root_Tx3: np.ndarray, span: int = 8, offset_deg: float = 35.0) -> np.ndarray:
+    """Per frame, the azimuth (degrees, matplotlib's) of a camera behind the walker and to its side:
+    the heading of the root's floor travel over +-span frames, unwrapped and smoothed."""
+    T = len(root_Tx3)
+    a, b = np.clip(np.arange(T) - span, 0, T - 1), np.clip(np.arange(T) + span, 0, T - 1)
+    d = root_Tx3[b] - root_Tx3[a]
+    heading = np.unwrap(np.arctan2(d[:, 2], d[:, 0]))  # in the axes' (x, y) = data (x, z) plane
+    if T > 1 and np.all(np.hypot(d[:, 0], d[:, 2]) < 1e-6):
+        heading[:] = 0.0
+    k = np.ones(2 * span + 1) / (2 * span + 1)
+    smooth = np.convolve(np.pad(heading, span, mode="edge"), k, mode="valid")
+    return np.degrees(smooth) + 180.0 + offset_deg
+
+
 def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, curves=None, joint_names=None,
-                    size: float = 4.0, dpi: int = 90, view: float = 2.2, trail: int = 32) -> Path:
+                    size: float = 4.0, dpi: int = 90, view: float = 2.2, trail: int = 32, bodies=None) -> Path:
     """Side-by-side 3-D animations with a chase camera, written atomically as .gif or .mp4.
 
     joints_list: list of (T, J, 3) arrays in metres, Y up (the floor is y = 0); parents: joint
@@ -107,8 +131,13 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
     reference's ±32); the root's floor trail of the last `trail` samples in blue. Panels are
     `size` inches at `dpi` (360 pixels by default). The camera looks at a `view`-metre cube
     centred on the current root's floor position, so long paths keep the character large.
-    Artists are updated in place; the figure is closed afterwards.
+    bodies (optional, one per panel or None): (triangles (N, 3), face colours (N, 3), a function
+    frame -> vertices (V, 3)) of a skinned body, drawn shaded instead of the bones; then the camera
+    follows behind the walker's side, the cube fits the body (it fills most of the frame) and a
+    floor grid is drawn around it. Artists are updated in place; the figure is closed afterwards.
     """
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
     plt = _pyplot()
     path = Path(path)
     writer = video_writer(path, fps)
@@ -118,23 +147,37 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
     colors = _bone_colors(parents, joint_names)
     fig = plt.figure(figsize=(size * n, size))
     panels = []
-    half = view / 2
     for i, joints in enumerate(joints_list):
         joints = np.asarray(joints, np.float64)
+        body = None if bodies is None else bodies[i]
+        half = view / 2
+        if body is not None:  # the cube around the body: its height and a little floor
+            half = 0.5 * max(1.2, float(np.max(joints[..., 1])) + 0.2)
+            fig.subplots_adjust(left=0, right=1, bottom=0, top=0.94, wspace=0)
         ax = fig.add_subplot(1, n, i + 1, projection="3d")
         ax.set_title(titles[i], fontsize=9)
-        ax.set_zlim(0, view)
+        ax.set_zlim(0, 2 * half)
+        ax.set_box_aspect((1, 1, 1), zoom=1.5 if body is not None else 1.0)
         for set_labels in (ax.set_xticklabels, ax.set_yticklabels, ax.set_zticklabels):
             set_labels([])
         ax.view_init(elev=15, azim=-60)
         curve = None if curves is None or curves[i] is None else np.asarray(curves[i], np.float64)
-        red = ax.plot([], [], [], color="red", lw=1)[0]
+        red = ax.plot([], [], [], color="red", lw=1.2)[0]
         blue = ax.plot([], [], [], color="tab:blue", lw=1)[0]
-        lines = [ax.plot([], [], [], color=col, lw=2.2)[0] for col in colors]
-        panels.append((ax, joints, curve, red, blue, lines))
+        if body is None:
+            lines = [ax.plot([], [], [], color=col, lw=2.2)[0] for col in colors]
+            mesh, azim, grid = None, None, []
+        else:
+            ax.set_axis_off()
+            lines = []
+            grid = [ax.plot([], [], [], color="0.72", lw=0.6)[0] for _ in range(2 * 9)]
+            mesh = Poly3DCollection([], edgecolor="none")
+            ax.add_collection3d(mesh)
+            azim = _follow_azimuth(joints[:, 0])
+        panels.append((ax, joints, curve, red, blue, lines, half, body, mesh, azim, grid))
 
     def draw(t):
-        for ax, joints, curve, red, blue, lines in panels:
+        for ax, joints, curve, red, blue, lines, half, body, mesh, azim, grid in panels:
             cx, cz = joints[t, 0, 0], joints[t, 0, 2]
             ax.set_xlim(cx - half, cx + half)
             ax.set_ylim(cz - half, cz + half)
@@ -142,6 +185,23 @@ def animate_motions(joints_list, parents, titles, path, *, fps: float = 15.0, cu
                 seg = joints[t, [p, c]]
                 line.set_data(seg[:, 0], seg[:, 2])
                 line.set_3d_properties(seg[:, 1])
+            if body is not None:
+                ax.view_init(elev=12, azim=azim[t])
+                # floor grid every 0.5 m inside the cube, fixed to the floor (it slides past as the camera follows)
+                ticks = np.arange(np.ceil((cx - half) * 2) / 2, cx + half, 0.5)[:9]
+                zt = np.arange(np.ceil((cz - half) * 2) / 2, cz + half, 0.5)[:9]
+                for k, line in enumerate(grid):
+                    if k < 9 and k < len(ticks):
+                        line.set_data([ticks[k]] * 2, [cz - half, cz + half])
+                    elif k >= 9 and k - 9 < len(zt):
+                        line.set_data([cx - half, cx + half], [zt[k - 9]] * 2)
+                    else:
+                        line.set_data([], [])
+                    line.set_3d_properties(np.zeros(len(line.get_xdata())))
+                tris_idx, base, vertices_at = body
+                tri = vertices_at(t)[tris_idx]  # (N, 3, 3) in data axes x, y (up), z
+                mesh.set_verts(tri[:, :, [0, 2, 1]])
+                mesh.set_facecolor(_shade(tri, base))
             root = _in_view(joints[max(0, t - trail): t + 1, 0], cx, cz, half)
             blue.set_data(root[:, 0], root[:, 2])
             blue.set_3d_properties(np.zeros(len(root)))

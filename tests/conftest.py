@@ -265,3 +265,52 @@ def _compilation_cache(tmp_path_factory):
 def repo() -> Path:
     return REPO
 
+
+
+# ---------------------------------------------------------------------------------------------
+# a walk without a model
+
+
+def toy_walk(frames: int = 45, fps: float = 15.0):
+    """(positions (F, J, 3) metres on the embedded dataset's layout, layout, the bvh.Motion they are
+    the forward kinematics of): a cheap stand-in for a generated walk on the project's own
+    CMU-named skeleton, its zero-length joints at rest. Hips, knees and arms swing at 0.9 Hz, the
+    body turns left, and the root moves so that the lower toe stays where it is (feet planted), the
+    lowest joint on the floor."""
+    import numpy as np
+
+    from motiongan_jax.data import synthetic
+    from motiongan_jax.motion import bvh, kinematics, representation
+
+    sk = synthetic.cmu_skeleton()
+    t = np.arange(frames) / fps
+    ph = 2 * np.pi * 0.9 * t
+    values = np.zeros((frames, sk.num_channels))
+    sl = dict(zip(sk.names, sk.channel_slices()))
+
+    def put(name, axis, deg):  # channels Zrotation Yrotation Xrotation (root: after 3 positions)
+        s = sl[name]
+        values[:, s.start + (3 if name == "Hips" else 0) + "ZYX".index(axis)] = deg
+
+    put("Hips", "Y", np.degrees(0.35 * t))  # turning left
+    for side, sign in (("Left", 1.0), ("Right", -1.0)):
+        put(f"{side}UpLeg", "X", -25 * sign * np.sin(ph))
+        put(f"{side}Leg", "X", 50 * np.maximum(0, sign * np.cos(ph)))
+        put(f"{side}Foot", "X", -10 * sign * np.sin(ph))
+        put(f"{side}Arm", "X", 20 * sign * np.sin(ph))
+        put(f"{side}Arm", "Z", -sign * 70.0)  # arms down from the T-pose
+        put(f"{side}ForeArm", "Y", sign * 20 * (1 + np.sin(ph)))
+    put("Spine", "Y", 5 * np.sin(ph))
+    put("Head", "X", 8.0)
+    rel = kinematics.world_positions(bvh.Motion(sk, 1.0 / fps, values))  # the root at the origin
+    toes = rel[:, [sk.names.index("LeftToeBase"), sk.names.index("RightToeBase")]]
+    stance = np.argmin(toes[..., 1], axis=1)
+    step = toes[1:, :, [0, 2]] - toes[:-1, :, [0, 2]]
+    moved = -step[np.arange(frames - 1), stance[1:]]
+    root = values[:, sl["Hips"].start:sl["Hips"].start + 3]
+    root[1:, [0, 2]] = np.cumsum(moved, axis=0)
+    root[:, 1] = -rel[..., 1].min(axis=1)
+    motion = bvh.Motion(sk, 1.0 / fps, values)
+    layout = representation.layout_from_skeleton(sk, synthetic.UNITS_TO_M)
+    world = kinematics.world_positions(motion) * synthetic.UNITS_TO_M
+    return world[:, list(layout.source_index)], layout, motion

@@ -167,6 +167,7 @@ def _style_error(text, names):
     ({"speed": 0.0}, 400, "0.3..3 m/s"),
     ({"speed": "fast"}, 400, "must be a number"),
     ({"colour": "red"}, 400, "unknown field"),
+    ({"rig": ["mixamo"]}, 400, "'rig' must be one of mixamo, smpl, bandai"),
     ({"styles": ["Happy"] * 3, "z": 3}, 400, "at most 8 at once"),
 ])
 def test_bad_requests_are_400s_naming_the_problem(client, engine, change, status, match):
@@ -258,6 +259,28 @@ def test_exports_are_written_by_generate_py_writers(client, engine, tmp_path, mo
     assert r.status_code == 400 and "at most 16 frames" in r.get_json()["error"]
     assert _post(client, "/api/export", {**body, "format": "bvh", "index": 2}).status_code == 400
     assert _post(client, "/api/export", {**body, "format": "exe"}).status_code == 400
+
+
+def test_glb_export_is_the_character_the_page_draws_on_the_chosen_rig(client, engine, tmp_path):
+    assert set(client.get("/api/model").get_json()["rigs"]) == {"mixamo", "smpl", "bandai"}
+    body = {"points": _line(32), "styles": ["Happy", "Sad"]}
+    res = engine.run(E.parse_request(body))
+    for rig in (None, "smpl"):
+        r = _post(client, "/api/export", {**body, "format": "glb", **({"rig": rig} if rig else {})})
+        assert r.status_code == 200 and r.mimetype == "model/gltf-binary" and r.data[:4] == b"glTF"
+        assert f'filename="motiongan_Happy_Sad{"_" + rig if rig else ""}.glb"' in r.headers["Content-Disposition"]
+        # the bytes generate.py's writers make of the same result: one animation per motion
+        from motiongan_jax.motion import rigs
+
+        writers.write_outputs(tmp_path / "w.glb", res.generated, res.titles, engine.layout, RATE,
+                              rig=None if rig is None else rigs.load_rig(rig))
+        assert (tmp_path / "w.glb").read_bytes() == r.data
+    r = _post(client, "/api/export", {**body, "format": "bvh", "rig": "mixamo"})
+    assert r.status_code == 200 and b"mixamorig:Hips" in r.data
+    for bad, match in (({"rig": "blender"}, "'rig' must be one of mixamo, smpl, bandai"),
+                       ({"rig": "smpl", "format": "npz"}, "a walk on a rig downloads as bvh or glb, not npz")):
+        r = _post(client, "/api/export", {**body, "format": "glb", **bad})
+        assert r.status_code == 400 and match in r.get_json()["error"], r.get_json()
 
 
 def test_concurrent_requests_each_get_their_own_answer(engine, client):

@@ -4,7 +4,8 @@ install`). The server is `python -m motiongan_jax.demo` on a free port with the 
 Draws a path with mouse events, picks a style, then a mix of two, checks that the animation
 runs and that the canvas shows the skeleton (pixels of the bones' colours that were not there
 before), downloads the BVH and reads it with bvh.py, and types a bad expression to see generate's
-message on the page. Without chromium or Playwright it fails under CI (which installs both, see
+message on the page. The character view: three.js draws the downloaded GLB's skinned body, and the
+rig picker changes the skeleton. Without chromium or Playwright it fails under CI (which installs both, see
 .ci/run) and skips elsewhere, saying what to install.
 """
 
@@ -83,6 +84,16 @@ def _bone_pixels(png: bytes) -> int:
     return int(sum(n.sum() for n in near))
 
 
+def _open(browser, demo_url):
+    """(page, the page's uncaught errors) of the demo, loaded: its style chips are there."""
+    page = browser.new_page(viewport={"width": 1280, "height": 860}, accept_downloads=True)
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(demo_url)
+    page.wait_for_selector("#mode-label .chip")
+    return page, errors
+
+
 def _wait_generated(page, previous: int, timeout=300_000):  # the first one compiles G
     page.wait_for_function(f"window.demo.state.seq > {previous} && !window.demo.state.inflight", timeout=timeout)
 
@@ -92,13 +103,12 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
     with playwright_api() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1280, "height": 860}, accept_downloads=True)
-            errors = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(demo_url)
-            page.wait_for_selector("#mode-label .chip")
+            page, errors = _open(browser, demo_url)
             assert page.locator("#mode-label .chip").all_inner_texts() == names
             page.locator("#auto").uncheck()
+            # the stick figure's bone colours (the character: below); set whether or not three.js loaded
+            page.evaluate("(() => { const e = document.getElementById('look'); e.value = 'stick'; "
+                          "e.dispatchEvent(new Event('change')); })()")
             empty = _bone_pixels(page.locator("#view").screenshot())
 
             # draw a wave on the floor canvas (300 px = 16 m: 3.2 m across, under 4.4 m long)
@@ -175,6 +185,70 @@ def test_draw_pick_a_style_and_a_mix_watch_download_and_see_errors(playwright_ap
             # undoing the only stroke takes its walk away with it
             page.locator("#undo").click()
             assert page.evaluate("window.demo.state.result === null && window.demo.frames === 0")
+            assert not errors, errors
+        finally:
+            browser.close()
+
+
+def _body_pixels(png: bytes) -> int:
+    """Pixels of the lit body (motion.gltf.BODY_COLOR, a light grey under a bluish sky light):
+    bright and nearly neutral, unlike the page's dark blue floor and sky, its grid and the path."""
+    import io
+
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), np.int32)
+    return int(np.sum((rgb.min(-1) > 75) & (rgb.max(-1) - rgb.min(-1) < 25)))
+
+
+def test_the_character_is_the_glb_and_the_rig_picker_changes_it(playwright_api, demo_url, tmp_path):
+    """three.js draws the GLB of /api/export (pixels of the skinned body, not only lines); the
+    GLB button downloads the same bytes; the rig picker loads the walk on another skeleton."""
+    import urllib.request
+
+    with playwright_api() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS + ["--use-angle=swiftshader",
+                                                                           "--enable-unsafe-swiftshader"])
+        try:
+            page, errors = _open(browser, demo_url)
+            page.wait_for_function("window.demoCharacter !== undefined")
+            assert page.evaluate("window.demoCharacter && window.demoCharacter.version") == "187", \
+                page.evaluate("window.demoCharacterError || null")
+            assert page.locator("#three-hint").is_hidden() and page.locator("#look").input_value() == "character"
+            page.locator("#auto").uncheck()
+            before = _body_pixels(page.locator("#view").screenshot())
+            page.locator("#presets button", has_text="Line").click()
+            page.wait_for_function("window.demo.state.strokes.length === 1")
+            seq = page.evaluate("window.demo.state.seq")
+            page.locator("#generate").click()
+            _wait_generated(page, seq)
+            page.wait_for_function("window.demo.character !== null", timeout=120_000)
+            char = page.evaluate("window.demo.character")
+            assert char["animations"] == ["Normal"] and char["meshes"] == 1 and char["rig"] == ""
+            page.wait_for_timeout(300)
+            shown = _body_pixels(page.locator("#view").screenshot())
+            assert shown > 2000 and shown > 10 * max(before, 1), (before, shown)
+
+            # the GLB button: the bytes the engine writes for the same request
+            with page.expect_download() as dl:
+                page.locator("#dl-glb").click()
+            path = tmp_path / dl.value.suggested_filename
+            dl.value.save_as(path)
+            body = page.evaluate("JSON.stringify({...window.demo.state.request, format: 'glb'})").encode()
+            req = urllib.request.Request(demo_url + "api/export", body, {"Content-Type": "application/json"})
+            with urllib.request.urlopen(req, timeout=120) as r:
+                assert path.read_bytes() == r.read()
+            assert path.read_bytes()[:4] == b"glTF" and char["bytes"] == path.stat().st_size
+
+            # the rig picker: the same walk on SMPL's skeleton
+            page.select_option("#rig", "smpl")
+            page.wait_for_function("window.demo.character && window.demo.character.rig === 'smpl'", timeout=120_000)
+            assert page.evaluate("window.demo.character.bytes") != char["bytes"]
+            with page.expect_download() as dl:
+                page.locator("#dl-glb").click()
+            assert dl.value.suggested_filename == "motiongan_Normal_smpl.glb"
+            page.wait_for_timeout(300)
+            assert _body_pixels(page.locator("#view").screenshot()) > 2000
             assert not errors, errors
         finally:
             browser.close()

@@ -22,6 +22,11 @@ imageio-ffmpeg), .png (pose strips). Several motions: .bvh/.npz get one file eac
 ...), .gif/.mp4/.png show them side by side. The whole curve is walked (up to the limits in
 motiongan_jax/generate/: 10 km, 36,000 samples); long ones go through G in chunks, with a
 progress line on stderr when that takes more than a few seconds.
+.glb / .gltf: a skinned character (the skeleton, a body made from its bone lengths, one animation
+per motion; metres, Y up, +Z forward). --rig RIG (a BVH file or a built-in rig: mixamo, smpl,
+bandai) retargets .bvh and glTF output onto that skeleton (joints matched by name through the
+built-in maps, or --rig-map MAP.json of role -> joint name; --rig-units when its units are not
+guessed right); its notes give the feet's skate and floor penetration beside the model's.
 --figure styles|interp|arith: the paper's Fig. 4 (--style "A,B,C" or all styles), Fig. 6
 (--style "A,B": α = 0, 1/4, 1/2, 3/4, 1) and Fig. 7 (--style "A - B + C": operands and result).
 Notes (the curve's sampling, the BVH's best-fit error) go to stderr, written paths to stdout.
@@ -74,6 +79,13 @@ def main(argv=None) -> int:
     ap.add_argument("--z", default="zero", help="zero (default), seed, or a number of samples K")
     ap.add_argument("--figure", choices=("styles", "interp", "arith"), default=None)
     ap.add_argument("--bvh-units", choices=("m", "cm"), default="m")
+    ap.add_argument("--rig", default=None,
+                    help="retarget onto another skeleton: a BVH file or a built-in rig (mixamo, smpl, bandai); "
+                         "with --out .bvh, .glb or .gltf")
+    ap.add_argument("--rig-map", default=None,
+                    help="a JSON file of role -> joint name for --rig (overrides the built-in name maps)")
+    ap.add_argument("--rig-units", default=None,
+                    help="metres per unit of --rig's file: m, cm, mm, inch or a number (default: from its leg)")
     ap.add_argument("--bvh-hierarchy", choices=("source", "exact"), default="source",
                     help="source (default): the training skeleton's joints, bones leaving a joint with several "
                          "children best-fit; exact: every bone direction exact, zero-length branch joints added")
@@ -84,12 +96,16 @@ def main(argv=None) -> int:
 
     if not 0 <= args.seed <= limits.MAX_SEED:  # the demo's API takes the same seeds
         ap.error(f"--seed must be an integer 0..{limits.MAX_SEED}, got {args.seed}")
+    from motiongan_jax.motion import rigs
     from motiongan_jax.motion.bvh import BVHError
+    from motiongan_jax.motion.gltf import GLTFError
     from motiongan_jax.motion.ik import IKError
     from motiongan_jax.train import checkpoint, pretrained
 
+    if args.rig is None and (args.rig_map or args.rig_units):
+        ap.error("--rig-map and --rig-units go with --rig")
     errors = (limits.GenerateError, checkpoint.CheckpointError, curves.DegenerateCurveError,
-              curves.CurveFileError, BVHError, IKError, OSError)
+              curves.CurveFileError, BVHError, IKError, rigs.RigError, GLTFError, OSError)
     try:
         if args.list_styles:
             print("\n".join(pretrained.model_meta(args.workdir, args.step, args.model)["style_names"]))
@@ -99,7 +115,8 @@ def main(argv=None) -> int:
             missing.insert(0, "--style")
         if missing:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
-        writers.check_output_path(args.out)  # fail before the model is loaded
+        writers.check_output_path(args.out, rig=args.rig is not None)  # fail before the model is loaded
+        rig = None if args.rig is None else rigs.load_rig(args.rig, map_path=args.rig_map, units=args.rig_units)
         use_compilation_cache()  # G compiled by an earlier run is loaded, not compiled again
         if args.speed is not None:
             limits.check_speed(args.speed)
@@ -125,7 +142,7 @@ def main(argv=None) -> int:
         zs = [z[k] for _ in panels for k in range(len(z))]
         generated = walk.generate_motion(state, layout, curve_M, w, progress=Progress())
         paths = writers.write_outputs(args.out, generated, titles, layout, rate, bvh_units=args.bvh_units,
-                                      bvh_hierarchy=args.bvh_hierarchy, z_per_motion=zs, log=_log)
+                                      bvh_hierarchy=args.bvh_hierarchy, z_per_motion=zs, log=_log, rig=rig)
     except errors as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

@@ -33,6 +33,7 @@ import numpy as np
 from motiongan_jax.data import curves
 from motiongan_jax.generate import limits, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
+from motiongan_jax.motion import rigs
 
 # Limits the server enforces on every request (each breach is a 400 naming it): an interactive
 # page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
@@ -50,7 +51,9 @@ STYLE_CACHE = 256  # style codes kept per (styles, z): the same style again cost
 SAMPLE_BUCKETS = (16, 32, 48, 64, 96, 128, 160, 192, 256, 320, 384, 512, 640, 768, 1024)
 BATCH_BUCKETS = (1, 2, 4, 8)
 WARM_FIRST_SAMPLES = 256  # warm_up compiles the buckets up to here first (21 s of walking at 15 Hz)
-EXPORT_FORMATS = {"bvh": "text/plain", "npz": "application/octet-stream", "gif": "image/gif"}
+EXPORT_FORMATS = {"bvh": "text/plain", "npz": "application/octet-stream", "gif": "image/gif",
+                  "glb": "model/gltf-binary"}
+RIG_FORMATS = ("bvh", "glb")  # what a walk on a built-in rig can be downloaded as
 DIGITS = 4  # decimals of the metres sent to the page (0.1 mm)
 
 
@@ -73,6 +76,7 @@ class Request:
     z: str | int
     seed: int
     speed: float | None
+    rig: str | None = None  # a built-in rig's name (motion.rigs.BUILTIN_RIGS), None: the model's skeleton
 
     @property
     def motions(self) -> int:
@@ -140,7 +144,7 @@ def parse_request(body) -> Request:
     """A Request from the decoded JSON body; RequestError (or a curves error) naming the problem."""
     if not isinstance(body, dict):
         raise RequestError("the request body must be a JSON object")
-    known = {"points", "styles", "z", "seed", "speed", "format", "index"}
+    known = {"points", "styles", "z", "seed", "speed", "format", "index", "rig"}
     unknown = sorted(set(body) - known)
     if unknown:
         raise RequestError(f"unknown field(s) {', '.join(map(repr, unknown))}; known: {', '.join(sorted(known))}"[:300])
@@ -173,7 +177,11 @@ def parse_request(body) -> Request:
         lo, hi = SPEED_RANGE_M_PER_S
         if not lo <= speed <= hi:
             raise RequestError(f"'speed' must be {lo:g}..{hi:g} m/s, got {speed:g}")
-    return Request(points, tuple(styles), z, seed, speed)
+    rig = body.get("rig", None)
+    if rig is not None and (not isinstance(rig, str) or rig not in rigs.BUILTIN_RIGS):
+        raise RequestError(f"'rig' must be one of {', '.join(rigs.BUILTIN_RIGS)} (or absent: the model's "
+                           f"skeleton), got {rig!r}"[:200])
+    return Request(points, tuple(styles), z, seed, speed, rig)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -223,6 +231,7 @@ class Engine:
             # what the page can tell its user while it waits: which programs are compiled, how many to go
             "compiled": self.compiled(), "programs": len(warm_plan()), "compile_s": self.compile_seconds(),
             "buckets": {"samples": list(SAMPLE_BUCKETS), "batch": list(BATCH_BUCKETS)},
+            "rigs": {name: desc for name, (_, _, desc) in rigs.BUILTIN_RIGS.items()},
         }
 
     def compiled(self) -> list[tuple[int, int]]:
@@ -346,21 +355,27 @@ class Engine:
         return out
 
     def export(self, body, run=None) -> tuple[bytes, str, str]:
-        """(file bytes, file name, MIME type) of /api/export: the motion `index` as .bvh/.npz, or
-        every motion side by side as .gif, written by generate.writers.write_outputs. The request,
-        the format, the index and the GIF's frame limit are checked before G runs; `run(fn, *args)`
-        runs the generation (the server's generation slot), the file is written outside it."""
+        """(file bytes, file name, MIME type) of /api/export: the motion `index` as .bvh/.npz, every
+        motion side by side as .gif, or every motion as one animation each of a skinned character
+        as .glb (what the page's 3-D view draws), written by generate.writers.write_outputs; with
+        "rig" (.bvh, .glb) on that built-in rig. The request, the format, the index and the GIF's
+        frame limit are checked before G runs; `run(fn, *args)` runs the generation (the server's
+        generation slot), the file is written outside it."""
         if not isinstance(body, dict):
             raise RequestError("the request body must be a JSON object")
         fmt = body.get("format")
         if fmt not in EXPORT_FORMATS:
             raise RequestError(f"'format' must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}"[:200])
         req = parse_request(body)
-        if fmt == "gif":
-            res = (run or _call)(self.run, req, GIF_MAX_FRAMES)
+        if req.rig is not None and fmt not in RIG_FORMATS:
+            raise RequestError(f"a walk on a rig downloads as {' or '.join(RIG_FORMATS)}, not {fmt}")
+        rig = None if req.rig is None else rigs.load_rig(req.rig)
+        suffix = f"_{req.rig}" if req.rig else ""
+        if fmt in ("gif", "glb"):
+            res = (run or _call)(self.run, req, GIF_MAX_FRAMES if fmt == "gif" else None)
             g = res.generated
             pick, titles, zs = g, res.titles, list(res.z_per_motion)
-            name = "motiongan_" + _safe_name("_".join(res.titles)) + ".gif"
+            name = "motiongan_" + _safe_name("_".join(res.titles)) + suffix + f".{fmt}"
         else:
             i = _int(body.get("index", 0), "'index'", 0, req.motions - 1)
             res = (run or _call)(self.run, req)
@@ -368,10 +383,10 @@ class Engine:
             pick = walk.Generated(g.positions[i:i + 1], g.root_velocity[i:i + 1], g.pose[i:i + 1],
                                   g.curve, g.w[i:i + 1], g.floor_shift_m[i:i + 1])
             titles, zs = (res.titles[i],), [res.z_per_motion[i]]
-            name = f"motiongan_{_safe_name(res.titles[i])}.{fmt}"
+            name = f"motiongan_{_safe_name(res.titles[i])}{suffix}.{fmt}"
         with tempfile.TemporaryDirectory(prefix="motiongan-demo-") as tmp:
             paths = writers.write_outputs(Path(tmp) / name, pick, titles, self.layout, self.rate,
-                                          z_per_motion=zs)
+                                          z_per_motion=zs, rig=rig)
             return paths[0].read_bytes(), name, EXPORT_FORMATS[fmt]
 
     # -- warm-up --------------------------------------------------------------------------------

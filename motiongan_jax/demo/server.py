@@ -12,7 +12,7 @@ Routes (JSON in and out; every refusal is {"error": message} with a 4xx status):
   GET  /api/shape        ?name=circle&length=10&scale=2: a built-in shape's floor points
   POST /api/style        {"style": "OldMan - Normal + Marching"}: its parsed form, or the error
   POST /api/generate     {"points", "styles", "z", "seed", "speed"}: the motions (engine.py)
-  POST /api/export       the same plus "format" (bvh|npz|gif) and "index": the file
+  POST /api/export       the same plus "format" (bvh|npz|gif|glb), "index" and "rig": the file
 Bad input (generate.py's style and curve errors, the demo's limits) is a 400 with the message
 bin/generate.py would print; a body over MAX_BODY_BYTES is a 413 (chunked ones too). Generation
 runs in the request threads, at most MAX_CONCURRENT at once (the others wait up to QUEUE_TIMEOUT_S,
@@ -35,7 +35,9 @@ from motiongan_jax.cli import add_model_arguments, use_compilation_cache
 from motiongan_jax.data import curves
 from motiongan_jax.demo import engine as engine_lib
 from motiongan_jax.generate import limits
+from motiongan_jax.motion.gltf import GLTFError
 from motiongan_jax.motion.ik import IKError
+from motiongan_jax.motion.rigs import RigError
 
 STATIC = Path(__file__).resolve().parent / "static"
 MAX_BODY_BYTES = 2 * 1024 * 1024
@@ -46,7 +48,7 @@ THREADS = 8  # waitress's request threads: a few beyond the generation slots for
 CONNECTIONS = 64  # open connections at most (waitress refuses more)
 IDLE_TIMEOUT_S = 30  # a connection idle (or sending nothing) this long is closed
 BAD_INPUT = (engine_lib.RequestError, limits.GenerateError, curves.DegenerateCurveError,
-             curves.CurveFileError, IKError)
+             curves.CurveFileError, IKError, RigError, GLTFError)
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 

@@ -75,7 +75,7 @@ def _check_parents(parents: Sequence[int], num_joints: int) -> tuple[int, ...]:
     return parents
 
 
-def _fk(xp: Any, rot, trans, parents: tuple[int, ...]):
+def _fk(xp: Any, rot, trans, parents: tuple[int, ...], with_rotations: bool = False):
     J = rot.shape[-3]
     parents = _check_parents(parents, J)
     world_rot: list = [None] * J
@@ -87,6 +87,8 @@ def _fk(xp: Any, rot, trans, parents: tuple[int, ...]):
         else:
             world_pos[j] = world_pos[p] + (world_rot[p] @ trans[..., j, :, None])[..., 0]
             world_rot[j] = world_rot[p] @ rot[..., j, :, :]
+    if with_rotations:
+        return xp.stack(world_rot, axis=-3), xp.stack(world_pos, axis=-2)
     return xp.stack(world_pos, axis=-2)
 
 
@@ -137,3 +139,10 @@ def world_positions(motion: Motion) -> np.ndarray:
     """World positions (F, J, 3) float64 in file units for every joint, End Sites included."""
     rot, trans = local_transforms(motion)
     return _fk(np, rot, trans, motion.skeleton.parents)
+
+
+def world_transforms(motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (F, J, 3, 3) and positions (F, J, 3, file units) of every joint, float64:
+    what skinning a body to the skeleton needs (a joint's world rotation turns the bones after it)."""
+    rot, trans = local_transforms(motion)
+    return _fk(np, rot, trans, motion.skeleton.parents, with_rotations=True)

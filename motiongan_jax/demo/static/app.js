@@ -1,5 +1,6 @@
 // MotionGAN demo page: draw a path on the floor, choose styles, watch the skeletons walk it.
-// Plain Canvas 2-D with a perspective projection: no library, nothing from outside this folder.
+// Stick figures in plain Canvas 2-D with a perspective projection; the character (the GLB that
+// /api/export writes) through character.js and three.js, installed beside this page by npm.
 "use strict";
 
 (() => {
@@ -26,6 +27,10 @@
     seq: 0,
     frameCount: 0,        // frames drawn (tests read it)
     exprTimer: null,
+    look: "character",    // "character" (three.js, when installed) or "stick"
+    rig: "",              // a built-in rig's name, "" for the model's skeleton
+    three: null,          // character.js's view, null without three.js or WebGL
+    char: { seq: 0, loaded: false, info: null, bytes: 0 },  // the GLB shown
   };
 
   // ------------------------------------------------------------------------------------------
@@ -417,6 +422,7 @@
       showError(null);
       $("hint").hidden = true;
       refreshMotions();
+      loadCharacter();
       const ms = performance.now() - t0;
       setStatus(`${res.frames} frames · ${res.length_m.toFixed(1)} m · server ${res.server_ms.total.toFixed(0)} ms · ` +
                 `round trip ${ms.toFixed(0)} ms`);
@@ -450,6 +456,25 @@
         `once (${about}); warmed up ${ready} of ${total}`);
   }
 
+  // the character: the GLB of the same request (every motion, one animation each, on the chosen rig)
+  async function loadCharacter() {
+    if (!S.three || !S.request) return;
+    const seq = ++S.char.seq;
+    S.char.loaded = false;
+    try {
+      const body = { ...S.request, format: "glb" };
+      if (S.rig) body.rig = S.rig;
+      const buf = await (await api("/api/export", body)).arrayBuffer();
+      if (seq !== S.char.seq) return;
+      S.three.setPath(S.result.curve);
+      const info = await S.three.load(buf);
+      if (seq !== S.char.seq) return;
+      S.char = { seq, loaded: true, info, bytes: buf.byteLength };
+    } catch (e) {
+      if (seq === S.char.seq) showError("character: " + e.message);
+    }
+  }
+
   function refreshMotions() {
     const sel = $("motion");
     sel.innerHTML = "";
@@ -470,13 +495,15 @@
     const btn = $("dl-" + fmt), label = btn.textContent;
     btn.disabled = true; btn.textContent = fmt === "gif" ? "drawing…" : "…";
     if (fmt === "gif" && S.result) {
-      // matplotlib draws every frame of every panel: about 0.07 s each on one core (docs/PERFORMANCE.md)
+      // matplotlib draws every frame of every panel, the shaded body: about 0.15 s each on one core
       const n = S.result.frames * S.result.motions.length;
       setStatus(`drawing the GIF: ${S.result.frames} frames × ${S.result.motions.length} panel(s), ` +
-                `about ${Math.max(1, Math.round(n * 0.07))} s`);
+                `about ${Math.max(1, Math.round(n * 0.15))} s`);
     }
     try {
-      const r = await api("/api/export", { ...S.request, format: fmt, index: S.selected });
+      const body = { ...S.request, format: fmt, index: S.selected };
+      if (S.rig && (fmt === "bvh" || fmt === "glb")) body.rig = S.rig;
+      const r = await api("/api/export", body);
       const blob = await r.blob();
       const cd = r.headers.get("Content-Disposition") || "";
       const m = /filename="([^"]+)"/.exec(cd);
@@ -569,16 +596,25 @@
     return { c: [(x0 + x1) / 2, 0.9, (z0 + z1) / 2], size: Math.max(x1 - x0, z1 - z0, 3) };
   }
 
-  function drawPanel(g, m, index, vx, vy, vw, vh, f, dt) {
+  function drawPanel(g, m, index, vx, vy, vw, vh, f, dt, character) {
     const title = m ? m.title : "";
     g.save();
     g.beginPath(); g.rect(vx, vy, vw, vh); g.clip();
     g.translate(vx, vy);
+    if (character) return drawCharacterPanel(g, m, index, vx, vy, vw, vh, f, dt, character, title);
     const sky = g.createLinearGradient(0, 0, 0, vh);
     sky.addColorStop(0, "#1d2536"); sky.addColorStop(0.55, "#121826"); sky.addColorStop(1, "#0b0e16");
     g.fillStyle = sky; g.fillRect(0, 0, vw, vh);
 
     const pose = m ? samplePose(m.positions, f) : null;
+    const { cam, target } = panelCamera(m, pose, index, vw, vh, f, dt);
+    drawScene(g, cam, target, pose, f);
+    drawTitle(g, title);
+    g.restore();
+  }
+
+  // the camera of a panel: following the walker (its hips) or orbiting the path
+  function panelCamera(m, pose, index, vw, vh, f, dt) {
     const root = m ? m.positions.map((p) => p[0]) : null;
     let cam, target;
     if (S.camera === "follow" && pose) {
@@ -595,6 +631,29 @@
       target = b.c;
       cam = makeCamera(target, S.orbit.yaw, S.orbit.pitch, S.orbit.dist * Math.max(1, b.size / 5), vw, vh);
     }
+    return { cam, target };
+  }
+
+  // a character panel: three.js draws the scene under this canvas; here only the title
+  function drawCharacterPanel(g, m, index, vx, vy, vw, vh, f, dt, character, title) {
+    const pose = m ? samplePose(m.positions, f) : null;
+    const { cam, target } = panelCamera(m, pose, index, vw, vh, f, dt);
+    character.push({ x: vx, y: vy, w: vw, h: vh, index, eye: cam.eye, target });
+    drawTitle(g, title);
+    g.restore();
+  }
+
+  function drawTitle(g, title) {
+    if (!title) return;
+    g.font = "600 13px system-ui, sans-serif";
+    const tw = g.measureText(title).width;
+    g.fillStyle = "rgba(14,18,27,0.7)";
+    g.fillRect(10, 10, tw + 18, 24);
+    g.fillStyle = "#e6ebf4";
+    g.fillText(title, 19, 27);
+  }
+
+  function drawScene(g, cam, target, pose, f) {
 
     // floor grid, fading with distance from what the camera looks at
     const R = S.camera === "follow" ? 9 : Math.ceil(pathBounds().size * 0.75 + 4);
@@ -670,15 +729,6 @@
         }
       }
     }
-    if (title) {
-      g.font = "600 13px system-ui, sans-serif";
-      const tw = g.measureText(title).width;
-      g.fillStyle = "rgba(14,18,27,0.7)";
-      g.fillRect(10, 10, tw + 18, 24);
-      g.fillStyle = "#e6ebf4";
-      g.fillText(title, 19, 27);
-    }
-    g.restore();
   }
 
   let last = performance.now();
@@ -699,14 +749,22 @@
     const ms = res ? res.motions : [null];
     const n = ms.length, cols = n <= 3 ? n : Math.ceil(n / 2), rows = Math.ceil(n / cols);
     const cw = w / cols, ch = h / rows;
+    const character = S.look === "character" && S.three && S.char.loaded && res && S.three.count === n ? [] : null;
+    g.clearRect(0, 0, w, h);
     for (let i = 0; i < n; i++) {
       const cx = (i % cols) * cw, cy = Math.floor(i / cols) * ch;
-      drawPanel(g, ms[i], i, cx, cy, cw, ch, f, dt);
+      drawPanel(g, ms[i], i, cx, cy, cw, ch, f, dt, character);
       if (n > 1) {
         g.strokeStyle = i === S.selected ? "rgba(94,200,255,0.75)" : "#283248";
         g.lineWidth = i === S.selected ? 2 : 1;
         g.strokeRect(cx + 0.5, cy + 0.5, cw - 1, ch - 1);
       }
+    }
+    const v3 = $("view3d");
+    v3.style.display = character ? "block" : "none";
+    if (character) {
+      Object.assign(v3.style, { left: view.offsetLeft + "px", top: view.offsetTop + "px", width: w + "px", height: h + "px" });
+      S.three.render(character, f / res.fps, w, h, dpr);
     }
     if (res) {
       $("scrub").value = String(Math.floor(f));
@@ -764,6 +822,8 @@
   });
   $("rate").onchange = (ev) => { S.rate = parseFloat(ev.target.value); };
   $("camera").onchange = (ev) => { S.camera = ev.target.value; S.follow.smoothYaw = []; };
+  $("look").onchange = (ev) => { S.look = ev.target.value; };
+  $("rig").onchange = (ev) => { S.rig = ev.target.value; loadCharacter(); };
   $("motion").onchange = (ev) => { S.selected = parseInt(ev.target.value, 10) || 0; };
   $("speed").addEventListener("input", (ev) => {
     $("speed-value").textContent = `${parseFloat(ev.target.value).toFixed(2)} m/s`;
@@ -797,17 +857,38 @@
     $("speed-value").textContent = `${S.model.default_speed.toFixed(2)} m/s`;
     $("z-k").max = S.model.limits.max_samples_z;
     $("k-wrap").style.display = "none";
+    for (const [name, desc] of Object.entries(S.model.rigs || {})) {
+      const o = document.createElement("option");
+      o.value = name; o.textContent = name; o.title = desc;
+      $("rig").appendChild(o);
+    }
     renderStyle();
     refreshMotions();
     drawFloor();
+    await characterReady;
+    try {
+      if (window.demoCharacter) S.three = window.demoCharacter.createView($("view3d"));
+    } catch (e) { S.three = null; window.demoCharacterError = String(e); }
+    if (!S.three) {
+      // three.js not installed (or no WebGL): stick figures, and a one-line hint
+      S.look = "stick"; $("look").value = "stick"; $("look").disabled = true; $("rig").disabled = true;
+      $("three-hint").hidden = false;
+    }
     requestAnimationFrame(frame);
   }
+
+  // character.js is an ES module loaded by index.html; it says when it is in (or failed)
+  const characterReady = new Promise((resolve) => {
+    if ("demoCharacter" in window) resolve();
+    else window.addEventListener("character-ready", () => resolve(), { once: true });
+  });
 
   // for tests and the console
   window.demo = {
     get state() { return S; },
     get frames() { return S.result ? S.result.frames : 0; },
     get drawn() { return S.frameCount; },
+    get character() { return S.char.loaded ? { ...S.char.info, bytes: S.char.bytes, rig: S.rig } : null; },
     generate,
   };
   init();
