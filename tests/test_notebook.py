@@ -130,7 +130,7 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     res = ns["res"]
     chex.assert_shape(res.w_D, (D,))
     assert np.isfinite(res.final_loss_S).all()
-    assert res.loss < res.initial_loss_S[res.best_start]
+    assert res.loss <= res.initial_loss_S[res.best_start]  # never worse than its start (search.style_search)
     assert res.loss == pytest.approx(float(res.final_loss_S.min()))
     chex.assert_shape(ns["target"].root_NxTx3, (PARAMS["SEARCH_WINDOWS"], PARAMS["SEARCH_T"], 3))
 

@@ -152,9 +152,12 @@ def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence
                                   host((w0 - center) / scale), host(center), host(scale), host(lr),
                                   host(vel_weight), host(length_unit), steps=int(steps),
                                   warmup=int(warmup), record_every=int(record_every))
-    final, hist, w = np.asarray(final), np.asarray(hist), np.asarray(w)
+    final, hist, w = np.asarray(final), np.asarray(hist), np.array(w)
     if not np.isfinite(final).any():
         raise AnalysisError(f"style search diverged from every start (final losses {final}); lower lr")
+    # a start that Adam left worse than it found it keeps its code as it was: never worse than the start
+    worse = ~(final <= hist[0])
+    w[worse], final = np.asarray(w0, np.float32)[worse], np.where(worse, hist[0], final)
     best = int(np.nanargmin(final))
     return SearchResult(w[best], float(final[best]), best, names, w, hist[0], final, hist, int(record_every))
 
