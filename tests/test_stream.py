@@ -134,7 +134,7 @@ def test_bad_input(shipped, w):
 
 
 def test_revised_path_turns_the_walker(shipped, w):
-    """A steering client revises the predicted path ahead: the walker turns at once and follows."""
+    """A caller that steers revises the predicted path ahead: the walker turns at once and follows."""
     state, layout, rate = shipped
     wk = stream.Walker(state, layout, w[0], rate)
     wk.feed_steps([[1.0, 0.0]] * 64, [1.2] * 64)

@@ -2,7 +2,7 @@
 
 A `Walker` holds a model, a style code w, the path walked so far and the gait state. `feed_steps`
 (a floor direction and a speed per sample) or `feed_points` (floor points, one per sample) append
-the path ahead, `revise_ahead` replaces the part not yet walked (a steering client's prediction
+the path ahead, `revise_ahead` replaces the part not yet walked (the caller's prediction
 of the path from its current input); `advance(n)` returns the next n motion samples, continuous with the ones before.
 
 How. Every advance runs G once on a window of `window` samples of the path (one compiled shape
@@ -27,7 +27,7 @@ as walk.chunk_starts), so a window sees the samples the one-pass walk sees where
    (each window runs with the code at its first new sample); the gait phase keeps running.
 
 Lookahead costs latency: a sample is emitted only once the path `lookahead` samples beyond it is
-known, i.e. lookahead / rate seconds after its input arrives (a steering client that predicts the
+known, i.e. lookahead / rate seconds after its input arrives (a caller that steers and predicts the
 path ahead from the current input can feed that prediction and pay nothing but the prediction's
 error). It costs quality below G's receptive radius (about 100 samples, walk.CHUNK_MARGIN): G's
 output at a sample depends on the path that far ahead, which the stream replaces by a straight
@@ -172,7 +172,7 @@ class Walker:
 
     def revise_ahead(self, points_Nx2) -> None:
         """Replaces the path not yet walked (from the next sample to emit) by these floor points,
-        one per sample: a steering client feeds the path it predicts from the current input and
+        one per sample: a caller that steers feeds the path it predicts from the current input and
         revises it when the input changes, so a turn reaches G at the next advance instead of
         `lookahead` samples later. The walked samples, root and phase are kept."""
         keep = max(self.emitted, 1) - self._base
