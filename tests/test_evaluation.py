@@ -205,7 +205,8 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
     evaluate = _load_cli(repo, "evaluate")
     out = tmp_path / "eval"
     assert evaluate(["--workdir", str(tiny_run), "--out", str(out), "--seeds", "0,1,2", "--k", "3",
-                     "--search-steps", "3", "--max-curves", "1", "--shapes", "line", "--realism-curves", "4"]) == 0
+                     "--search-steps", "3", "--max-curves", "1", "--shapes", "line", "--realism-curves", "4",
+                     "--stream-curves", "1"]) == 0
     report = json.loads((out / "report.json").read_text())
     h, r = report["header"], report["results"]
     assert h["evaluator_checksum"] == ev.checksum and h["checkpoint_step"] == 4
@@ -256,6 +257,13 @@ def test_cli_train_evaluator_then_evaluate(repo, tiny_run, tmp_path, capsys):
         assert len(gen[key]["per_seed"]) == 3, key
     for g in ("gait", "posture", "speed", "all", "evaluator"):
         assert 0.0 <= gen[f"two_sample_{g}"]["mean"] <= 1.0
+    # streaming: one held-out path walked whole and as a stream, per seed; the two agree (one walk:
+    # the same G on the same path, code and phase), and the stream's seams are measured
+    assert [b["seed"] for b in r["streaming"]] == [0, 1, 2] and all(b["curves"] == 1 for b in r["streaming"])
+    for b in r["streaming"]:
+        assert b["whole_support"] == pytest.approx(b["stream_support"], abs=0.2)
+        assert np.isfinite(b["stream_max_rel_diff"]) and np.isfinite(b["stream_seam_jerk_ratio"])
+    assert len(gen["stream_max_rel_diff"]["per_seed"]) == 3 and "## Streaming" in md
     styled = [v for v in r["per_style"].values() if "own_step_frequency_hz" in v["generated"]]
     assert len(styled) == len(r["per_style"])
     assert all(len(v["generated"]["step_frequency_hz@1.3"]["per_seed"]) == 3 for v in styled)
@@ -279,6 +287,8 @@ def test_cli_evaluate_errors(repo, tiny_run, tmp_path, capsys):
     assert "no checkpoints" in capsys.readouterr().err
     assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"), "--seeds", "a,b"]) == 2
     assert "--seeds" in capsys.readouterr().err
+    assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"), "--k", "1"]) == 2
+    assert "--k >= 2" in capsys.readouterr().err  # one draw has no multimodality
     assert evaluate(["--out", str(tmp_path / "o")]) == 2  # the shipped model: no run to find an evaluator in
     assert "needs --evaluator" in capsys.readouterr().err
     assert evaluate(["--workdir", str(tiny_run), "--out", str(tmp_path / "o"),

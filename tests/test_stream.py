@@ -152,3 +152,26 @@ def test_revised_path_turns_the_walker(shipped, w):
     with pytest.raises(stream.StreamError, match="finite"):
         wk.revise_ahead([[np.nan, 0.0]])
     assert len(wk._points) > 1  # a refused revision keeps the path
+
+
+def test_seam_steps_and_seam_values_by_hand():
+    """evaluation/streaming.py's seam measures: the steps that reach across a boundary, and toes
+    gliding on the floor at 0.1 m per sample except a 0.3 m jump into sample 10 (a boundary):
+    seam / rest speed is 3 at 10 Hz; a boundary elsewhere sees no difference."""
+    from motiongan_jax.evaluation import streaming
+
+    np.testing.assert_array_equal(np.flatnonzero(streaming.seam_steps([10], 20, 1)), [9])
+    np.testing.assert_array_equal(np.flatnonzero(streaming.seam_steps([10, 0], 20, 3)), [7, 8, 9])
+    L, rate = 20, 10.0
+    x = np.cumsum(np.r_[0.0, np.full(L - 1, 0.1)])
+    x[10:] += 0.2  # the step 9 -> 10 is 0.3 m
+    joints = np.zeros((L, 3, 3))
+    joints[:, :, 0] = x[:, None]  # root and both toes glide together, on the floor
+    joints[:, 0, 1] = 0.9
+    phase = 0.5 * np.arange(L)
+    v = streaming.seam_values(joints, phase, (1, 2), rate, 0.02, [10])
+    np.testing.assert_allclose(v["toe_speed"][0], [3.0, 3.0])  # both toes, the seam step
+    np.testing.assert_allclose(v["toe_speed"][1], 1.0)
+    assert streaming._ratio([v["toe_speed"]]) == pytest.approx(3.0)
+    np.testing.assert_allclose(v["phase"][0], 0.0)  # the clock steps evenly
+    assert streaming._ratio([streaming.seam_values(joints, phase, (1, 2), rate, 0.02, [5])["toe_speed"]]) < 1.0

@@ -39,6 +39,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-curves", type=int, default=12, help="held-out real curves at most")
     ap.add_argument("--realism-curves", type=int, default=48,
                     help="held-out paths walked like for like in the realism part, at most (0: skip it)")
+    ap.add_argument("--stream-curves", type=int, default=6,
+                    help="of those, paths also walked as a live stream, whole and streamed compared (0: skip)")
     ap.add_argument("--shapes", default=",".join(("line", "circle", "s_curve", "figure8", "corner")),
                     help="synthetic curve shapes (comma-separated)")
     args = ap.parse_args(argv)
@@ -56,15 +58,17 @@ def main(argv=None) -> int:
             seeds = tuple(int(s) for s in args.seeds.split(",") if s.strip())
         except ValueError:
             raise ConfigError(f"--seeds must be comma-separated integers, got {args.seeds!r}") from None
-        if not seeds or args.k < 1:
-            raise ConfigError("need at least one seed and --k >= 1")
+        if not seeds or args.k < 2:
+            raise ConfigError("need at least one seed and --k >= 2 (multimodality compares the draws of a curve "
+                              "and style)")
         shapes = tuple(s.strip() for s in args.shapes.split(",") if s.strip())
         bad = [s for s in shapes if s not in curves.SHAPES]
         if bad:
             raise ConfigError(f"--shapes: unknown shape(s) {bad}; known: {', '.join(curves.SHAPES)}")
         settings = protocol.Settings(seeds=seeds, k=args.k, max_heldout_curves=args.max_curves,
                                        search_steps=args.search_steps, search_clips=1 if args.search_steps > 0 else 0,
-                                       realism_max_curves=args.realism_curves)
+                                       realism_max_curves=args.realism_curves,
+                                       stream_curves=max(0, args.stream_curves))
         report, ctx = protocol.evaluate_run(args.workdir, settings, shapes, step=args.step, params=args.params,
                                               data_dir=args.data, evaluator_path=args.evaluator,
                                               cmu_curves=args.cmu_curves,

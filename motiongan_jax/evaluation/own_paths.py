@@ -73,7 +73,7 @@ def _rows_of(joints_NxTxJx3):
     return root, (j[:, :, 1:] - root[:, :, None]).reshape(len(j), j.shape[1], -1)
 
 
-def _sra(ev, joints_NxTxJx3, labels_N, C) -> tuple[float, np.ndarray]:
+def style_accuracy(ev, joints_NxTxJx3, labels_N, C) -> tuple[float, np.ndarray]:
     """(top-1, per-class top-1 C) of an evaluator on world-joint windows (nan where a class is absent)."""
     if ev is None or len(labels_N) == 0:
         return float("nan"), np.full(C, np.nan)
@@ -111,8 +111,8 @@ def real_block(ctx) -> dict:
     E = np.concatenate(ev_feats)
     reference = _reference(X, E, names, kinds, paths, labels)
     windows = np.concatenate(wins)
-    top1, _ = _sra(ctx.ev, windows, labels, C)
-    sf_top1, sf_per = _sra(ctx.ev_speed_free, windows, labels, C)
+    top1, _ = style_accuracy(ctx.ev, windows, labels, C)
+    sf_top1, sf_per = style_accuracy(ctx.ev_speed_free, windows, labels, C)
     out = {"X": X, "names": names, "kinds": kinds, "paths": paths, "labels": labels, "ev_feats": E,
            "per_clip": per_clip, "reference": reference, "sra": top1, "sra_speed_free": sf_top1,
            "sra_speed_free_per_style": sf_per}
@@ -202,8 +202,8 @@ def generated_block(ctx, seed: int, real: dict) -> dict:
                                   realism.numpy_rng(jax.random.key(60_000 + seed)),
                                   extra={"evaluator": (real["ev_feats"], E)})
     windows = np.concatenate(wins)
-    top1, per = _sra(ctx.ev, windows, labels, C)
-    sf_top1, sf_per = _sra(ctx.ev_speed_free, windows, labels, C)
+    top1, per = style_accuracy(ctx.ev, windows, labels, C)
+    sf_top1, sf_per = style_accuracy(ctx.ev_speed_free, windows, labels, C)
     return {"tests": tests, "per_clip": per_clip, "sra_own_speed": top1, "sra_own_speed_per_style": per,
             "sra_speed_free_own_speed": sf_top1, "sra_speed_free_own_speed_per_style": sf_per}
 
@@ -236,8 +236,8 @@ def default_speed_block(ctx, seed: int) -> dict:
     if not wins:
         return {}
     windows, labels = np.concatenate(wins), np.concatenate(labels)
-    top1, per = _sra(ctx.ev, windows, labels, C)
-    sf_top1, sf_per = _sra(ctx.ev_speed_free, windows, labels, C)
+    top1, per = style_accuracy(ctx.ev, windows, labels, C)
+    sf_top1, sf_per = style_accuracy(ctx.ev_speed_free, windows, labels, C)
     return {"sra_default_speed": top1, "sra_default_speed_per_style": per,
             "sra_speed_free_default_speed": sf_top1, "sra_speed_free_default_speed_per_style": sf_per}
 

@@ -24,7 +24,7 @@ from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.analysis import style_space
 from motiongan_jax.config import ConfigError, config_hash
 from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
-from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics, own_paths
+from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics, own_paths, streaming
 from motiongan_jax.evaluation.eval_curves import (
     EvalCurve,
     file_curves,
@@ -58,6 +58,7 @@ class Settings:
     w_samples: int = 10
     realism_windows: int = 8  # like-for-like walks (own_paths.py): each held-out path up to this many windows
     realism_max_curves: int = 48
+    stream_curves: int = 6  # like-for-like paths also walked as a live stream (streaming.py); 0: none
 
 
 @dataclasses.dataclass
@@ -298,7 +299,7 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
             real_per_style[name]["stride_speed_slope"] = realism_real["real_slope_per_style"][c]["slope"]
     realism_seeds = []
 
-    per_seed, per_seed_style, confusions = [], [], []
+    per_seed, per_seed_style, confusions, stream_seeds = [], [], [], []
     for seed in s.seeds:
         log(f"seed {seed}: generating {len(ctx.curves_)} curves x {C} styles x {s.k} draws")
         g = _generate_block(ctx, seed, ctx.contact_height_m)
@@ -334,6 +335,11 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
                         else float("nan")})
             realism_seeds.append({"seed": seed, "tests": rg["tests"], "style": own_paths.style_rows(rg["per_clip"], C),
                                   "own": rg, "default": rd, "sweep": rs})
+        if s.stream_curves and ctx.realism_curves:
+            log(f"seed {seed}: streaming ({min(s.stream_curves, len(ctx.realism_curves))} held-out paths)")
+            sb = streaming.stream_block(ctx, seed)
+            row.update({k: v for k, v in sb.items() if k.startswith(("stream_", "whole_seam_"))})
+            stream_seeds.append({"seed": seed, **sb})
         per_seed.append(row)
         st = {}
         for c in range(C):
@@ -372,6 +378,7 @@ def evaluate(ctx: Context, log: Callable[[str], None] = print) -> dict:
         "real": real_row,
         "per_style": per_style,
         "realism": _realism_summary(ctx, realism_real, realism_seeds),
+        "streaming": stream_seeds,
         "search": search,
         "discriminator_probe": probe,
         "confusion_generated": np.sum(confusions, axis=0).tolist(),

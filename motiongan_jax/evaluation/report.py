@@ -15,6 +15,7 @@ from motiongan_jax.analysis import style_space
 from motiongan_jax.evaluation import clip_metrics
 from motiongan_jax.evaluation.protocol import Context
 from motiongan_jax.evaluation.realism import FOLDS
+from motiongan_jax.generate import stream
 
 ROWS = [
     ("sra_top1", "style accuracy top-1 (evaluator)"),
@@ -124,6 +125,7 @@ def markdown(report: dict) -> str:
                      f"{_fmt(re_['step_frequency_same_curve_hz'])} | "
                      f"{_fmt(g['step_frequency_ratio']['mean'])} |")
     lines += realism_markdown(r, h)
+    lines += streaming_markdown(r)
     if r.get("discriminator_probe"):
         lines += ["", "The trained D's verdict (mean P(real), share judged real) on real training windows and "
                       "on the same windows altered:", "", "| D's input | P(real) | judged real |", "|---|---|---|"]
@@ -131,6 +133,35 @@ def markdown(report: dict) -> str:
             lines.append(f"| {name} | {_fmt(v['p_real'])} | {_fmt(v['judged_real'])} |")
     lines += ["", "Plots: `confusion.png` (generated and real), `pca_w.png`.", ""]
     return "\n".join(lines)
+
+
+STREAM_ROWS = [("support", "support"), ("lower_foot_height_m", "lower toe (m)"), ("skate_ratio", "skating ratio"),
+               ("alternation", "alternation"), ("step_frequency_hz", "step frequency (Hz)"),
+               ("step_amplitude_m", "step amplitude (m)"), ("jerk_mps3", "jerk (m/s³)"),
+               ("sra_top1", "style top-1 (evaluator)"),
+               ("seam_toe_speed_ratio", "seams: planted-toe speed, seam / rest"),
+               ("seam_jerk_ratio", "seams: joint jerk, seam / rest"),
+               ("seam_phase_ratio", "seams: phase-step deviation, seam / rest")]
+
+
+def streaming_markdown(r: dict) -> list[str]:
+    """The streaming part (streaming.py): whole-path against streamed walks of the same paths,
+    styles, codes and phases, per seed."""
+    seeds = r.get("streaming") or []
+    if not seeds:
+        return []
+    lines = ["", f"## Streaming: {seeds[0]['curves']} held-out paths walked whole and as a live stream "
+                 f"(the path known {stream.LOOKAHEAD} samples ahead, {stream.MAX_STEP} samples per advance); "
+                 "seams at the advances' boundaries "
+                 "(1 = not seen; the whole walk cut at the same samples is the control)", "",
+             "| measure | " + " | ".join(f"whole s{b['seed']} | stream s{b['seed']}" for b in seeds) + " |",
+             "|---|" + "---|---|" * len(seeds)]
+    for key, label in STREAM_ROWS:
+        lines.append(f"| {label} | " + " | ".join(f"{_fmt(b.get('whole_' + key))} | {_fmt(b.get('stream_' + key))}"
+                                                   for b in seeds) + " |")
+    lines.append("| largest relative difference, stream vs whole (gait, skate, jerk, style rows) | "
+                 + " | ".join(f"| {_fmt(b.get('stream_max_rel_diff'))}" for b in seeds) + " |")
+    return lines
 
 
 def realism_markdown(r: dict, h: dict) -> list[str]:

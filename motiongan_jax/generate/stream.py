@@ -168,7 +168,7 @@ class Walker:
             if np.linalg.norm(d) > 1e-9:
                 self._last_dir = d / np.linalg.norm(d)
                 self._last_speed = float(np.linalg.norm(d)) * self.rate
-        self._points = np.concatenate([self._points, np.stack([pts[:, 0], np.zeros(len(pts)), pts[:, 1]], 1)])
+        self._points = np.concatenate([self._points, trajectory.on_floor(pts)])
 
     def revise_ahead(self, points_Nx2) -> None:
         """Replaces the path not yet walked (from the next sample to emit) by these floor points,
