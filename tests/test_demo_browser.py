@@ -391,8 +391,7 @@ def test_steer_a_minute_with_the_keys_in_two_styles(playwright_api, demo_server)
                 if i % int(5 * rate) == 0:
                     records += page.evaluate("window.demo.steer.drain()")
                     stats.append((t, page.evaluate("fetch('/api/steer').then((r) => r.json())")))
-                    if t in (15.0, STEER_SECONDS):
-                        rss[t] = _rss_mib(proc.pid)
+                    rss[t] = _rss_mib(proc.pid)
             wall = time.monotonic() - t_start
             records += page.evaluate("window.demo.steer.drain()")
             shown = _bone_pixels(page.locator("#view").screenshot())
@@ -490,9 +489,10 @@ def test_steer_a_minute_with_the_keys_in_two_styles(playwright_api, demo_server)
         assert 2.5 < np.linalg.norm(np.array(cam["eye"]) - np.array(cam["target"])) < 4.5
 
     # the server: one walker all along, its state flat once its rings are full (by 15 s), and its
-    # memory flat after that (a compile per step or a walker that kept its walk would add hundreds of
-    # MiB in 45 s; allocator noise is a few)
-    print(f"steer: server RSS {rss[15.0]:.0f} MiB at 15 s, {rss[STEER_SECONDS]:.0f} MiB at 60 s; walker state "
+    # memory flat after that: the median RSS of 45-60 s within 30 MiB of that of 15-30 s (RSS moves
+    # by about 15 MiB either way from one 5-s reading to the next here; a compile per step would
+    # add MiBs a second; what a walker keeps is the state numbers' to bound)
+    print(f"steer: server RSS {[round(r) for r in rss.values()]} MiB every 5 s; walker state "
           f"{[s['state_numbers'] for _, s in stats]} numbers")
     assert all(s["walkers"] == 1 and s["max_walkers"] == 8 for _, s in stats), stats
     # (the state moves with each step's size; one that kept 3 numbers a sample would grow 1350 in 30 s)
@@ -500,4 +500,6 @@ def test_steer_a_minute_with_the_keys_in_two_styles(playwright_api, demo_server)
     late = [s["state_numbers"][0] for t, s in stats if t > 45]
     emitted = [s["emitted"][0] for _, s in stats]
     assert emitted[-1] > 3 * emitted[2] and max(late) <= max(early) + 500, (early, late, emitted)
-    assert rss[STEER_SECONDS] - rss[15.0] < 40, rss
+    early_rss = np.median([r for t, r in rss.items() if 15 <= t <= 30])
+    late_rss = np.median([r for t, r in rss.items() if t >= 45])
+    assert late_rss - early_rss < 30, rss

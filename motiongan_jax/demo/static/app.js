@@ -848,6 +848,8 @@
   const TURN_EASE_S = 0.1;   // the turn rate eases in and out, so the path's curvature never jumps
   const ACCEL = 0.8;         // m/s per second with a speed key held
   const KEEP = 240;          // samples kept for drawing (16 s at 15 Hz): the page's memory stays flat
+  const MIN_STEP = 4;        // samples a step asks for at least: a step costs the server one G call,
+                             // whatever its size, so fewer, larger steps let it hold more walkers
   const DEADZONE = 0.15;     // of a gamepad's stick
   const KEYS = { ArrowLeft: "left", KeyA: "left", ArrowRight: "right", KeyD: "right",
                  ArrowUp: "faster", KeyW: "faster", ArrowDown: "slower", KeyS: "slower" };
@@ -963,7 +965,7 @@
     if (ST.inflight || performance.now() < ST.retryAt) return ST.inflight;
     const buffered = emitted() - 1 - ST.clock;
     if (buffered >= bufferTarget()) return null;
-    return steerStep(clamp(Math.ceil(bufferTarget() - buffered) + 1, 1, ST.maxSamples));
+    return steerStep(clamp(Math.ceil(bufferTarget() - buffered) + 1, MIN_STEP, ST.maxSamples));
   }
 
   // the edited style (the style panel's, as in draw mode) to the walker, which blends to it
