@@ -359,12 +359,14 @@ def test_warm_up_compiles_what_the_page_can_ask_for(engine):
     assert sorted(plan) == sorted((T, B) for T in E.SAMPLE_BUCKETS for B in E.BATCH_BUCKETS)
     assert plan[0] == (16, 1) and len(set(plan)) == len(plan)
     fresh = E.Engine(engine.state, engine.meta, engine.cfg, engine.layout)
-    assert fresh.info()["compiled"] == [] and not fresh.info()["warm"]
+    assert fresh.info()["compiled"] == [] and not fresh.info()["warm"] and not fresh.info()["walker_warm"]
     ran = []
     fresh.warm_up(run=lambda fn, *args: ran.append(fn.__name__) or fn(*args), plan=[(48, 1)])  # test_demo's
     info = fresh.info()
     assert info["compiled"] == [(48, 1)] and info["warm"] and info["compile_s"] is not None
-    assert ran == ["_spec_codes"] * E.MAX_SAMPLES_Z + ["run"]  # every z's codes, then G, each in a slot
+    assert info["walker_warm"]
+    # every z's codes, the steer mode's stream window, then G, each in a slot
+    assert ran == ["_spec_codes"] * E.MAX_SAMPLES_Z + ["_warm_walker", "run"]
 
 
 def test_the_compilation_cache_folder_is_the_users_unless_told(monkeypatch, tmp_path):
@@ -385,3 +387,190 @@ def test_the_compilation_cache_folder_is_the_users_unless_told(monkeypatch, tmp_
         assert use_compilation_cache() == str(tmp_path / "root" / "xla")
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
+
+
+# ---- steer mode (demo/steer.py): a walker per tab, fed the path its keys predict ----------------
+
+from motiongan_jax.demo import steer as steer_lib  # noqa: E402
+
+
+@pytest.fixture()
+def steer_app(engine):
+    """A fresh app (its own walkers) whose steering clock the test moves."""
+    app = server.create_app(engine)
+    now = [1000.0]
+    app.config["steering"].clock = lambda: now[0]
+    return app.test_client(), app.config["steering"], now
+
+
+def _ahead(last, heading, n, speed=SPEED, turn=0.0):
+    """n points on from `last` (x, z), starting along angle `heading`, turning `turn` rad per sample:
+    what the page predicts from its keys."""
+    pts, p, h = [], np.asarray(last, float), heading
+    for _ in range(n):
+        h += turn
+        p = p + speed / RATE * np.array([np.cos(h), np.sin(h)])
+        pts.append(p)
+    return np.array(pts)
+
+
+def test_steer_streams_what_a_walker_fed_the_same_path_makes(steer_app, engine):
+    """Steps through the API emit exactly what generate.stream.Walker emits for the same path
+    (to the rounding of the JSON), contiguous from sample 0, on the path that was sent."""
+    client, steering, _ = steer_app
+    r = _post(client, "/api/steer/start", {"style": "happy", "speed": SPEED, "start": [1.0, -2.0]})
+    assert r.status_code == 200, r.get_json()
+    st = r.get_json()
+    assert st["style"] == "Happy" and st["next"] == 1 and st["last_point"] == [1.0, -2.0]
+    L = st["lookahead"]
+    w, _ = engine.style_code("Happy")
+    ref = engine.walker(w, (1.0, -2.0), (1.0, 0.0), SPEED)
+    J = len(engine.layout.joint_names)
+    nxt, last, heading, got, want, curve = st["next"], np.array(st["last_point"]), 0.0, [], [], []
+    for k, n in enumerate([4, 1, 16, 7, 5]):
+        ahead = _ahead(last, heading, L + n, turn=0.08 if k >= 2 else 0.0)
+        r = _post(client, "/api/steer/step", {"session": st["session"], "from": nxt, "samples": n,
+                                              "ahead": ahead.tolist()})
+        assert r.status_code == 200, r.get_json()
+        out = r.get_json()
+        assert out["index0"] == sum(len(g) for g in got)  # contiguous, from sample 0
+        pos = np.array(out["positions"])
+        chex.assert_shape(pos, (n, J, 3))
+        chex.assert_shape(np.array(out["curve"]), (n, 2))
+        ref.revise_ahead(ahead)
+        want.append(ref.advance(n).positions)
+        got.append(pos)
+        curve.append(np.array(out["curve"]))
+        used = out["next"] - 1 - (nxt - 1)  # the sent points the walker has now walked
+        assert out["next"] == sum(len(g) for g in got) and out["blend"] == [1.0] * n
+        np.testing.assert_allclose(out["last_point"], ahead[used - 1], atol=1e-4)
+        heading += 0.08 * used if k >= 2 else 0.0
+        nxt, last = out["next"], np.array(out["last_point"])
+    np.testing.assert_allclose(np.concatenate(got), np.concatenate(want), atol=0.6 * 10 ** -E.DIGITS)
+    walked = np.concatenate(curve)
+    np.testing.assert_allclose(walked[0], [1.0, -2.0])
+    steps = np.linalg.norm(np.diff(walked, axis=0), axis=1)
+    np.testing.assert_allclose(steps, SPEED / RATE, atol=2e-4)  # the sent spacing, every sample
+    stats = client.get("/api/steer").get_json()
+    assert stats["walkers"] == 1 and stats["emitted"] == [33]
+    assert _post(client, "/api/steer/stop", {"session": st["session"]}).get_json() == {"stopped": True}
+    assert client.get("/api/steer").get_json()["walkers"] == 0
+
+
+def test_steer_style_change_blends_over_a_second(steer_app, engine):
+    client, _, _ = steer_app
+    st = _post(client, "/api/steer/start", {"style": "Normal"}).get_json()
+    L, sid = st["lookahead"], st["session"]
+    nxt, last, blends = 1, np.array([0.0, 0.0]), []
+
+    def step(n):
+        nonlocal nxt, last
+        out = _post(client, "/api/steer/step", {"session": sid, "from": nxt, "samples": n,
+                                                "ahead": _ahead(last, 0.0, L + n).tolist()}).get_json()
+        nxt, last = out["next"], np.array(out["last_point"])
+        return out
+
+    step(6)
+    r = _post(client, "/api/steer/style", {"session": sid, "style": "OldMan:0.5,Sad:0.5"})
+    assert r.get_json() == {"style": "OldMan:0.5,Sad:0.5", "from": 6, "blend_s": 1.0}
+    for _ in range(3):
+        out = step(8)
+        blends += out["blend"]
+        assert out["style"] == "OldMan:0.5,Sad:0.5"
+    # sample 6 + k is k / 15 of the way (15 samples a second), then there
+    np.testing.assert_allclose(blends, np.minimum(np.arange(24) / RATE, 1.0), atol=1e-4)
+    r = _post(client, "/api/steer/style", {"session": sid, "style": "Hapy"})
+    assert r.status_code == 400 and r.get_json()["error"] == _style_error("Hapy", engine.style_names)
+    assert step(1)["style"] == "OldMan:0.5,Sad:0.5"  # a refused style changes nothing
+
+
+def test_steer_walkers_are_bounded_in_number_and_dropped_when_idle(steer_app):
+    client, steering, now = steer_app
+    ids = []
+    for _ in range(steer_lib.MAX_WALKERS):
+        r = _post(client, "/api/steer/start", {"style": "Happy"})
+        assert r.status_code == 200, r.get_json()
+        ids.append(r.get_json()["session"])
+    assert len(set(ids)) == steer_lib.MAX_WALKERS
+    r = _post(client, "/api/steer/start", {"style": "Happy"})
+    assert r.status_code == 503 and r.headers["Retry-After"] == "30"
+    assert re.search(r"at most 8 walkers at once", r.get_json()["error"])
+    assert _post(client, "/api/steer/stop", {"session": ids.pop()}).status_code == 200
+    now[0] += 20.0  # the rest idle 20 s; one of them asks for something: it stays
+    assert _post(client, "/api/steer/style", {"session": ids[0], "style": "Sad"}).status_code == 200
+    r = _post(client, "/api/steer/start", {"style": "Happy"})  # the stopped one's room
+    assert r.status_code == 200
+    ids.append(r.get_json()["session"])
+    now[0] += steer_lib.IDLE_S - 10.0 + 0.5  # 30.5 s since the others' last request
+    stats = client.get("/api/steer").get_json()
+    assert stats["walkers"] == 2 and stats["max_walkers"] == 8  # ids[0] (10.5 s) and the new one
+    r = _post(client, "/api/steer/style", {"session": ids[1], "style": "Sad"})
+    assert r.status_code == 404 and "dropped" in r.get_json()["error"]
+    assert _post(client, "/api/steer/style", {"session": ids[0], "style": "Happy"}).status_code == 200
+
+
+def _started(client):
+    st = _post(client, "/api/steer/start", {"style": "Happy"}).get_json()
+    return st, {"session": st["session"], "from": 1, "samples": 2,
+                "ahead": _ahead([0.0, 0.0], 0.0, st["lookahead"] + 2).tolist()}
+
+
+@pytest.mark.parametrize("path, change, status, match", [
+    ("step", {"session": "nope"}, 404, "no walker 'nope' here"),
+    ("step", {"session": 7}, 400, "'session' must be the id"),
+    ("step", {"from": 5}, 409, "'from' is 5, but this walker's path ahead starts at sample 1"),
+    ("step", {"session": "\ud800"}, 404, "no walker"),
+    ("step", {"from": 10 ** 30}, 400, "'from' must be an integer"),
+    ("step", {"from": 1.0}, 400, "'from' must be an integer"),
+    ("step", {"samples": True}, 400, "'samples' must be an integer 1..16"),
+    ("step", {"samples": 0}, 400, "'samples' must be an integer 1..16"),
+    ("step", {"samples": 10 ** 6}, 400, "'samples' must be an integer 1..16"),
+    ("step", {"ahead": [[0.1, 0.0]] * 5}, 400, "send at least 33"),
+    ("step", {"ahead": [[0.08 * (i + 1), 0.0] for i in range(steer_lib.MAX_AHEAD_POINTS + 1)]}, 400,
+     "at most 128"),
+    ("step", {"ahead": [[0.08, 0.0], [50.0, 0.0]] + [[50.0, 0.0]] * 40}, 400,
+     r"the step into entry 1 is 49.9 m, 749 m/s .* at most 3 m/s"),
+    ("step", {"ahead": [[0.08, 0.0], ["0.16", 0.0]]}, 400, "'ahead': entry 1 must be a number"),
+    ("step", {"ahead": [[0.08, 0.0], [0.16]]}, 400, r"'ahead': entry 1 must be an \[x, z\] pair"),
+    ("step", {"ahead": "forward"}, 400, "'ahead' must be a non-empty list"),
+    ("step", {"extra": 1}, 400, "unknown field"),
+    ("style", {"style": "w.npy"}, 400, "w files are not accepted"),
+    ("style", {"style": ""}, 400, "non-empty string"),
+    ("style", {"style": "Happy", "z": 3}, 400, "'z' must be 'zero' or 'seed'"),
+    ("stop", {"session": "x" * 65}, 400, "'session' must be the id"),
+    ("start", {"style": "Happy", "speed": 30.0}, 400, r"'speed' must be 0.3..3 m/s"),
+    ("start", {"style": "Happy", "heading": [0, 0]}, 400, "non-zero floor direction"),
+    ("start", {"style": "Happy", "start": [1e300, 0]}, 400, "within 1000 km"),
+    ("start", {"style": "Happy", "start": [10 ** 400, 0]}, 400, "finite number"),
+    ("start", {"style": "Happy", "seed": 2 ** 31}, 400, "'seed' must be an integer"),
+    ("start", {"style": ["Happy"]}, 400, "'style' must be a non-empty string"),
+    ("start", {}, 400, "missing field\\(s\\) 'style'"),
+])
+def test_bad_steer_requests_are_4xx_naming_the_problem(steer_app, path, change, status, match):
+    client, _, _ = steer_app
+    st, good = _started(client)
+    body = {**(good if path == "step" else {"session": st["session"]} if path != "start" else {}), **change}
+    r = _post(client, f"/api/steer/{path}", body)
+    assert r.status_code == status, r.get_json()
+    assert re.search(match, r.get_json()["error"]), r.get_json()["error"]
+    # the walker still steps after a refused request (unless the session was the problem)
+    assert _post(client, "/api/steer/step", good).status_code == 200
+
+
+def test_steer_non_finite_and_huge_bodies(steer_app):
+    client, _, _ = steer_app
+    st, good = _started(client)
+    L = st["lookahead"]
+    for bad in ("NaN", "Infinity", "-Infinity", "1e999"):
+        pts = ", ".join(["[0.08, 0.0]", f"[{bad}, 0.0]"] + ["[0.2, 0.0]"] * L)
+        data = f'{{"session": "{st["session"]}", "from": 1, "samples": 2, "ahead": [{pts}]}}'
+        r = client.post("/api/steer/step", data=data, content_type="application/json")
+        assert r.status_code == 400 and "finite" in r.get_json()["error"], (bad, r.get_json())
+    big = json.dumps({**good, "ahead": good["ahead"] * 20000})
+    r = client.post("/api/steer/step", data=big, content_type="application/json")
+    assert r.status_code == 413 and "too large" in r.get_json()["error"]
+    r = client.post("/api/steer/step", data="{" * 100, content_type="application/json")
+    assert r.status_code == 400
+    assert client.post("/api/steer/dance", json={}).status_code == 404
+    assert client.get("/api/steer/step").status_code == 405
+    assert _post(client, "/api/steer/step", good).status_code == 200

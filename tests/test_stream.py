@@ -175,3 +175,30 @@ def test_seam_steps_and_seam_values_by_hand():
     assert streaming._ratio([v["toe_speed"]]) == pytest.approx(3.0)
     np.testing.assert_allclose(v["phase"][0], 0.0)  # the clock steps evenly
     assert streaming._ratio([streaming.seam_values(joints, phase, (1, 2), rate, 0.02, [5])["toe_speed"]]) < 1.0
+
+
+def test_style_blends_linearly_from_where_it_is(shipped, w):
+    """set_style moves w in a straight line to the new code over blend_s seconds of samples,
+    starting at the next sample to emit; a change during a blend starts from the code reached."""
+    state, layout, rate = shipped
+    wk = stream.Walker(state, layout, w[0], rate)
+    assert wk.style_progress(0) == 1.0  # no blend under way
+    np.testing.assert_array_equal(wk.style_at(0), w[0])
+    wk.feed_steps([[1.0, 0.0]] * (wk.lookahead + 8), [1.2] * (wk.lookahead + 8))
+    wk.advance(8)
+    wk.set_style(w[1], blend_s=1.0)
+    n = round(rate)  # samples in one second
+    for k in (0, 1, n // 3, n - 1, n, n + 7):
+        a = min(k / n, 1.0)
+        assert wk.style_progress(8 + k) == pytest.approx(a)
+        np.testing.assert_allclose(wk.style_at(8 + k), (1 - a) * w[0] + a * w[1], rtol=1e-5, atol=1e-6)
+    wk.feed_steps([[1.0, 0.0]] * 5, [1.2] * 5)
+    wk.advance(5)  # 5 samples into the blend
+    halfway = wk.style_at(13)
+    wk.set_style(w[0], blend_s=2.0)
+    np.testing.assert_allclose(wk.style_at(13), halfway, rtol=1e-6)  # no jump
+    np.testing.assert_allclose(wk.style_at(13 + n), 0.5 * halfway + 0.5 * w[0], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(wk.style_at(13 + 2 * n), w[0], rtol=1e-6)
+    np.testing.assert_allclose(wk.path_point(wk.emitted - 1), [(wk.emitted - 1) * 1.2 / rate, 0.0], atol=1e-9)
+    with pytest.raises(stream.StreamError, match="not held"):
+        wk.path_point(wk.known)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from motiongan_jax.data import curves
-from motiongan_jax.generate import limits, user_curves, walk, writers
+from motiongan_jax.generate import limits, stream, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
 from motiongan_jax.motion import rigs
 
@@ -212,6 +212,7 @@ class Engine:
         self.rate = walk.sample_rate(meta, cfg)
         self.title, self.details = title, details
         self._warm = threading.Event()
+        self._walker_warm = threading.Event()  # the steer mode's stream window is compiled
         self._compiled: set[tuple[int, int]] = set()  # (sample bucket, batch bucket) G has run at
         self._compile_times: list[float] = []  # seconds of each first run at a new pair
         self._codes: collections.OrderedDict = collections.OrderedDict()
@@ -227,7 +228,7 @@ class Engine:
                        "max_samples_z": MAX_SAMPLES_Z, "max_motions": MAX_MOTIONS,
                        "max_samples": SAMPLE_BUCKETS[-1], "speed_m_per_s": list(SPEED_RANGE_M_PER_S),
                        "gif_max_frames": GIF_MAX_FRAMES},
-            "warm": self._warm.is_set(),
+            "warm": self._warm.is_set(), "walker_warm": self._walker_warm.is_set(),
             # what the page can tell its user while it waits: which programs are compiled, how many to go
             "compiled": self.compiled(), "programs": len(warm_plan()), "compile_s": self.compile_seconds(),
             "buckets": {"samples": list(SAMPLE_BUCKETS), "batch": list(BATCH_BUCKETS)},
@@ -278,6 +279,32 @@ class Engine:
             raise RequestError(f"shape {name} at scale {scale:g} m is {total:.1f} m long; the demo "
                                f"walks at most {MAX_PATH_M:g} m")
         return curves.resample_polyline(pts, num_points=int(min(max(total / 0.05, 200), 1200)) + 1)
+
+    def style_code(self, text, z="zero", seed=0) -> tuple[np.ndarray, str]:
+        """(w (w_dim,), its canonical text) of one style string at z "zero" or "seed" (a steered
+        walker has one code); the codes are remembered as generate's are."""
+        if not isinstance(text, str) or not text.strip() or len(text) > MAX_STYLE_CHARS:
+            raise RequestError(f"'style' must be a non-empty string of at most {MAX_STYLE_CHARS} characters")
+        if not isinstance(z, str) or z.strip().lower() not in ("zero", "seed"):
+            raise RequestError(f"'z' must be 'zero' or 'seed' for a steered walker, got {z!r}"[:200])
+        seed = _int(seed, "'seed'", 0, MAX_SEED)
+        spec = self._spec(text, seed)
+        return self._spec_codes([spec], styles_lib.z_codes(self.state, z, seed))[0], spec.text
+
+    def walker(self, w, start_xz=(0.0, 0.0), heading_xz=(1.0, 0.0), speed=None) -> stream.Walker:
+        """A streaming walker (generate.stream) of this model, at the stream's default window: every
+        walker of the process shares one compiled program."""
+        speed = user_curves.DEFAULT_SPEED_M_PER_S if speed is None else speed
+        return stream.Walker(self.state, self.layout, w, self.rate, start_xz=start_xz, heading_xz=heading_xz,
+                             speed_m_per_s=speed)
+
+    def _warm_walker(self) -> None:
+        w, _ = self.style_code(self.style_names[0])
+        wk = self.walker(w)
+        n = wk.lookahead + 1
+        wk.feed_steps(np.tile([1.0, 0.0], (n, 1)), np.full(n, user_curves.DEFAULT_SPEED_M_PER_S))
+        wk.advance(1)
+        self._walker_warm.set()
 
     # -- generation -----------------------------------------------------------------------------
     def run(self, req: Request, max_frames: int | None = None, max_motions: int = MAX_MOTIONS) -> Result:
@@ -392,14 +419,16 @@ class Engine:
     # -- warm-up --------------------------------------------------------------------------------
     def warm_up(self, run=None, plan=None) -> float:
         """Compiles G for every (sample bucket, batch bucket) of `plan` (default: warm_plan(), all
-        the page can ask for) not compiled yet, and the style codes of every z the page can ask
-        for, so that no request waits for a compile; `run(fn, *args)` runs each (the server's
-        generation slot). Returns seconds."""
+        the page can ask for) not compiled yet, the style codes of every z the page can ask for and
+        the steer mode's stream window, so that no request waits for a compile; `run(fn, *args)`
+        runs each (the server's generation slot). Returns seconds."""
         t0 = time.perf_counter()
         run = run or _call
         name = self.style_names[0]
         for k in range(1, MAX_SAMPLES_Z + 1):  # the latent codes of z = K (z = zero/seed: K = 1)
             run(self._spec_codes, [self._spec(name, 0)], styles_lib.z_codes(self.state, k, 0))
+        if not self._walker_warm.is_set():  # one program serves every walker
+            run(self._warm_walker)
         for T, B in plan or warm_plan():
             if (T, B) in self.compiled():
                 continue

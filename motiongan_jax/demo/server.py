@@ -13,11 +13,18 @@ Routes (JSON in and out; every refusal is {"error": message} with a 4xx status):
   POST /api/style        {"style": "OldMan - Normal + Marching"}: its parsed form, or the error
   POST /api/generate     {"points", "styles", "z", "seed", "speed"}: the motions (engine.py)
   POST /api/export       the same plus "format" (bvh|npz|gif|glb), "index" and "rig": the file
+  POST /api/steer/start  {"style", "z", "seed", "start", "heading", "speed"}: a walker of its own (steer.py)
+  POST /api/steer/step   {"session", "from", "ahead", "samples"}: the next samples along the predicted path
+  POST /api/steer/style  {"session", "style", "z", "seed"}: blend to another style over a second
+  POST /api/steer/stop   {"session"}: the walker is dropped
+  GET  /api/steer        how many walkers are live and how much each holds
 Bad input (generate.py's style and curve errors, the demo's limits) is a 400 with the message
 bin/generate.py would print; a body over MAX_BODY_BYTES is a 413 (chunked ones too). Generation
 runs in the request threads, at most MAX_CONCURRENT at once (the others wait up to QUEUE_TIMEOUT_S,
 then get a 503), so many requests cannot pile up memory; an export draws its file after giving
-its generation slot back, MAX_EXPORTS at a time (a GIF takes matplotlib seconds to draw).
+its generation slot back, MAX_EXPORTS at a time (a GIF takes matplotlib seconds to draw). Steered
+walkers have their own bounds and slots (steer.py): an unknown walker is a 404, a request on a
+walker another one holds a 409, a start beyond steer.MAX_WALKERS a 503.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from werkzeug.exceptions import HTTPException
 from motiongan_jax.cli import add_model_arguments, use_compilation_cache
 from motiongan_jax.data import curves
 from motiongan_jax.demo import engine as engine_lib
+from motiongan_jax.demo import steer as steer_lib
 from motiongan_jax.generate import limits
 from motiongan_jax.motion.gltf import GLTFError
 from motiongan_jax.motion.ik import IKError
@@ -99,6 +107,11 @@ def create_app(engine: engine_lib.Engine) -> Flask:
     for exc in BAD_INPUT:
         app.register_error_handler(exc, bad_input)
 
+    @app.errorhandler(steer_lib.SteerError)
+    def steer_refused(err):
+        headers = {} if err.retry_after_s is None else {"Retry-After": str(int(round(err.retry_after_s)))}
+        return jsonify(error=str(err)), err.status, headers
+
     @app.errorhandler(Busy)
     def busy(err):
         what = err.args[0] if err.args else "generations"
@@ -158,6 +171,24 @@ def create_app(engine: engine_lib.Engine) -> Flask:
         data, name, mime = bounded(engine.export, body(), bounded, sem=export_slots, what="exports")
         return app.response_class(data, mimetype=mime,
                                   headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+    steering = steer_lib.Steering(engine)
+    app.config["steering"] = steering
+
+    @app.get("/api/steer")
+    def steer_stats():
+        return jsonify(steering.stats())
+
+    @app.post("/api/steer/<action>")
+    def steer(action):
+        act = {"start": steering.start, "step": steering.step, "style": steering.style, "stop": steering.stop}
+        if action not in act:
+            return jsonify(error=f"unknown steer action {action[:40]!r}; known: {', '.join(act)}"), 404
+        t0 = time.perf_counter()
+        out = act[action](body())
+        if action == "step":
+            out["server_ms"]["total"] = round(1e3 * (time.perf_counter() - t0), 2)
+        return jsonify(out)
 
     return app
 

@@ -101,7 +101,7 @@ class Walker:
         self.gait = model_apply.has_gait_phase(self.model)
         w = self._check_w(w_D)
         self._w_from = self._w_to = w
-        self._w_change, self._w_blend = 0, 1
+        self._w_change, self._w_blend = -1, 1  # no blend under way: every sample has w
         # the path: points[k] is sample base + k; samples < emitted are walked
         start = self._check_xz(start_xz, "start")
         self._points = np.array([[start[0], 0.0, start[1]]], np.float64)
@@ -212,9 +212,20 @@ class Walker:
         self._w_from, self._w_to = self.style_at(self.emitted), w
         self._w_change, self._w_blend = self.emitted, max(1, round(blend_s * self.rate))
 
+    def style_progress(self, t: int) -> float:
+        """How far sample t is into the last set_style's blend: 0 (the previous code) to 1 (the new one)."""
+        return float(np.clip((t - self._w_change) / self._w_blend, 0.0, 1.0))
+
     def style_at(self, t: int) -> np.ndarray:
-        a = np.clip((t - self._w_change) / self._w_blend, 0.0, 1.0)
+        a = self.style_progress(t)
         return ((1 - a) * self._w_from + a * self._w_to).astype(np.float32)
+
+    def path_point(self, t: int) -> np.ndarray:
+        """The path's floor point (x, z) at sample t, for t in the ring or the known path ahead."""
+        k = int(t) - self._base
+        if not 0 <= k < len(self._points):
+            raise StreamError(f"sample {t} is not held (the walker holds samples {self._base} to {self.known - 1})")
+        return self._points[k, [0, 2]].copy()
 
     # ---- output ------------------------------------------------------------------------------
 

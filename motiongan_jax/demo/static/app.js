@@ -1,4 +1,5 @@
-// MotionGAN demo page: draw a path on the floor, choose styles, watch the skeletons walk it.
+// MotionGAN demo page: draw a path on the floor, choose styles, watch the skeletons walk it; or
+// steer one walker live with the keys or a gamepad (the server generates it as it goes).
 // Stick figures in plain Canvas 2-D with a perspective projection; the character (the GLB that
 // /api/export writes) through character.js and three.js, installed beside this page by npm.
 "use strict";
@@ -31,6 +32,7 @@
     rig: "",              // a built-in rig's name, "" for the model's skeleton
     three: null,          // character.js's view, null without three.js or WebGL
     char: { seq: 0, loaded: false, info: null, bytes: 0 },  // the GLB shown
+    mode: "draw",         // "draw" (a drawn path, every panel) or "steer" (one walker, live)
   };
 
   // ------------------------------------------------------------------------------------------
@@ -158,6 +160,18 @@
       for (const p of pts) g.lineTo(X(p[0]), Z(p[1]));
       g.stroke();
     };
+    if (S.mode === "steer") {
+      // the walked trail, the predicted path ahead, the walker
+      line(ST.curve, "#ff7a59", 2);
+      line(ST.ahead, "rgba(255,209,194,0.55)", 1.5);
+      const pose = steerPose();
+      if (pose) {
+        g.fillStyle = "#5ec8ff";
+        g.beginPath(); g.arc(X(pose[0][0]), Z(pose[0][2]), 4.5, 0, 2 * Math.PI); g.fill();
+      }
+      $("path-length").textContent = `${(ST.walked).toFixed(1)} m walked`;
+      return;
+    }
     const pts = pathPoints();
     line(pts, "rgba(255,122,89,0.35)", 6);
     line(pts, "#ff7a59", 2);
@@ -188,6 +202,7 @@
   }
 
   floor.canvas.addEventListener("pointerdown", (ev) => {
+    if (S.mode === "steer") return;  // the floor shows the steered walk's trail
     floor.canvas.setPointerCapture(ev.pointerId);
     const p = toFloor(ev);
     const pts = pathPoints();
@@ -397,6 +412,7 @@
 
   let autoTimer = null;
   function changed(now) {
+    if (S.mode === "steer") { steerStyle(); return; }  // the walker blends to the edited style
     if (!$("auto").checked || !pathPoints().length) return;
     clearTimeout(autoTimer);
     autoTimer = setTimeout(generate, now ? 0 : 120);
@@ -589,7 +605,7 @@
   }
 
   function pathBounds() {
-    const pts = S.result ? S.result.curve : pathPoints();
+    const pts = S.mode === "steer" ? ST.curve : S.result ? S.result.curve : pathPoints();
     let x0 = Infinity, x1 = -Infinity, z0 = Infinity, z1 = -Infinity;
     for (const [x, z] of pts) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); z0 = Math.min(z0, z); z1 = Math.max(z1, z); }
     if (!isFinite(x0)) return { c: [0, 0.9, 0], size: 4 };
@@ -631,6 +647,7 @@
       target = b.c;
       cam = makeCamera(target, S.orbit.yaw, S.orbit.pitch, S.orbit.dist * Math.max(1, b.size / 5), vw, vh);
     }
+    if (index === 0) S.camera0 = { eye: cam.eye, target };  // what the first panel looks at (tests)
     return { cam, target };
   }
 
@@ -651,6 +668,13 @@
     g.fillRect(10, 10, tw + 18, 24);
     g.fillStyle = "#e6ebf4";
     g.fillText(title, 19, 27);
+  }
+
+  // the path drawn in the 3-D view and how much of it is walked at frame f
+  function scenePath(f) {
+    if (S.mode === "steer") return { curve: ST.curve.concat(ST.ahead), k: Math.floor(f) };
+    if (S.result) return { curve: S.result.curve, k: Math.floor(f) };
+    return { curve: pathPoints(), k: 0 };
   }
 
   function drawScene(g, cam, target, pose, f) {
@@ -675,9 +699,8 @@
     }
 
     // the path on the floor: walked part brighter
-    if (S.result || pathPoints().length) {
-      const curve = S.result ? S.result.curve : pathPoints();
-      const k = S.result ? Math.floor(f) : 0;
+    const { curve, k } = scenePath(f);
+    if (curve.length) {
       g.lineCap = "round";
       for (let i = 1; i < curve.length; i++) {
         const s = segment(cam, [curve[i - 1][0], 0.002, curve[i - 1][1]], [curve[i][0], 0.002, curve[i][1]]);
@@ -741,15 +764,18 @@
     const g = view.getContext("2d");
     g.setTransform(dpr, 0, 0, dpr, 0, 0);
     const w = view.clientWidth, h = view.clientHeight;
-    const res = S.result;
+    const steer = S.mode === "steer";
+    if (steer) steerFrame(dt);
+    const res = steer ? null : S.result;
     if (res && S.playing) {
       S.time = (S.time + dt * S.rate) % (res.frames / res.fps);
     }
-    const f = currentFrame();
-    const ms = res ? res.motions : [null];
+    const f = steer ? steerFrameIndex() : currentFrame();
+    const ms = steer ? [steerMotion()] : res ? res.motions : [null];
     const n = ms.length, cols = n <= 3 ? n : Math.ceil(n / 2), rows = Math.ceil(n / cols);
     const cw = w / cols, ch = h / rows;
-    const character = S.look === "character" && S.three && S.char.loaded && res && S.three.count === n ? [] : null;
+    // the steered walker is drawn as a stick figure (the character plays a whole downloaded animation)
+    const character = !steer && S.look === "character" && S.three && S.char.loaded && res && S.three.count === n ? [] : null;
     g.clearRect(0, 0, w, h);
     for (let i = 0; i < n; i++) {
       const cx = (i % cols) * cw, cy = Math.floor(i / cols) * ch;
@@ -770,6 +796,12 @@
       $("scrub").value = String(Math.floor(f));
       $("time").textContent = `${(f / res.fps).toFixed(1)} / ${(res.frames / res.fps).toFixed(1)} s`;
       drawFloor();
+    }
+    if (steer) {
+      if (S.camera0) ST.cam = { clock: ST.base + steerFrameIndex(), ...S.camera0 };  // the clock as drawn
+      $("time").textContent = `${(ST.clock / ST.fps).toFixed(1)} s`;
+      drawFloor();
+      if (S.frameCount % 6 === 0) renderSteerInfo();
     }
     S.frameCount++;
     requestAnimationFrame(frame);
@@ -806,6 +838,289 @@
   }, { passive: false });
 
   // ------------------------------------------------------------------------------------------
+  // Steer: one walker generated as it goes (the server's demo/steer.py), turned and sped up live
+  // ------------------------------------------------------------------------------------------
+  // The page owns the path: it predicts it from the input now (turn rate and speed held
+  // constant for the lookahead) and sends it with every step, so a key reaches the generator at the
+  // next step. Steps are short polls, each for the few samples that keep a small buffer ahead
+  // of the clock (its size follows the round trip), so the walker never waits and a key shows soon.
+  const TURN_RATE = 1.2;     // rad/s with a turn key held: a 1 m radius at 1.2 m/s
+  const TURN_EASE_S = 0.1;   // the turn rate eases in and out, so the path's curvature never jumps
+  const ACCEL = 0.8;         // m/s per second with a speed key held
+  const KEEP = 240;          // samples kept for drawing (16 s at 15 Hz): the page's memory stays flat
+  const MIN_STEP = 4;        // samples a step asks for at least: a step costs the server one G call,
+                             // whatever its size, so fewer, larger steps let it hold more walkers
+  const DEADZONE = 0.15;     // of a gamepad's stick
+  const KEYS = { ArrowLeft: "left", KeyA: "left", ArrowRight: "right", KeyD: "right",
+                 ArrowUp: "faster", KeyW: "faster", ArrowDown: "slower", KeyS: "slower" };
+  const ST = {
+    session: null, starting: false, inflight: null, retryAt: 0, styleBusy: false, styleKey: "",
+    fps: 15, lookahead: 32, maxSamples: 16,
+    next: 1, lastPoint: [0, 0], psi: 0,  // the path's frontier: the next step's first sample, the point and heading before it
+    speed: 1.2, omega: 0,                // the input now: m/s along the path, rad/s of turning (+: to the right)
+    held: new Set(),
+    samples: [], curve: [], base: 0,     // the last KEEP samples' joints and path points; base: the first's index
+    ahead: [],                           // the path predicted beyond them (drawn ahead of the walker)
+    clock: 0,                            // the display time in samples since the walker started
+    driven: false,                       // tests: the clock moves only by tick(), not with real time
+    rtt: 0.15, serverMs: 0, stalls: 0, walked: 0, style: "", blend: 1,
+    record: null,                        // tests: every step's answer
+    cam: null,
+  };
+  const emitted = () => ST.base + ST.samples.length;
+  const clamp = (v, lo, hi) => Math.max(lo, Math.min(hi, v));
+
+  function steerFrameIndex() { return clamp(ST.clock - ST.base, 0, Math.max(0, ST.samples.length - 1)); }
+  function steerPose() { return ST.samples.length ? samplePose(ST.samples, steerFrameIndex()) : null; }
+  function steerMotion() {
+    if (!ST.samples.length) return null;
+    const title = ST.blend < 1 ? `${ST.style} (blending in, ${Math.round(100 * ST.blend)} %)` : ST.style;
+    return { title, positions: ST.samples };
+  }
+
+  // samples to keep ahead of the clock: the round trip and a little, within one step's worth
+  function bufferTarget() { return clamp(Math.ceil(ST.fps * (0.05 + 1.5 * ST.rtt)), 2, ST.maxSamples); }
+
+  function steerZ() {
+    return { z: $("z-mode").value === "zero" ? "zero" : "seed",
+             seed: Math.min(2147483647, Math.max(0, parseInt($("seed").value, 10) || 0)) };
+  }
+
+  function gamepad() {
+    const pads = navigator.getGamepads ? navigator.getGamepads() : [];
+    for (const p of pads) {
+      if (!p || !p.connected) continue;
+      const dz = (v) => (Math.abs(v || 0) < DEADZONE ? 0 : v);
+      const trig = (i) => (p.buttons[i] ? p.buttons[i].value : 0);
+      return { turn: dz(p.axes[0]), accel: clamp(-dz(p.axes[1]) + trig(7) - trig(6), -1, 1) };
+    }
+    return null;
+  }
+
+  // the input over dt seconds: keys held and a gamepad
+  function steerInput(dt) {
+    let turn = (ST.held.has("right") ? 1 : 0) - (ST.held.has("left") ? 1 : 0);
+    let accel = (ST.held.has("faster") ? 1 : 0) - (ST.held.has("slower") ? 1 : 0);
+    const pad = gamepad();
+    if (pad) { turn += pad.turn; accel += pad.accel; }
+    ST.omega += (TURN_RATE * clamp(turn, -1, 1) - ST.omega) * Math.min(1, dt / TURN_EASE_S);
+    const [lo, hi] = S.model.limits.speed_m_per_s;
+    ST.speed = clamp(ST.speed + ACCEL * clamp(accel, -1, 1) * dt, lo, hi);
+  }
+
+  // the path from the frontier on, the input now held: count points, one a sample
+  function predict(count) {
+    const pts = [], psis = [];
+    let [x, z] = ST.lastPoint, psi = ST.psi;
+    const step = ST.speed / ST.fps, turn = ST.omega / ST.fps;
+    for (let i = 0; i < count; i++) {
+      psi += turn; x += step * Math.cos(psi); z += step * Math.sin(psi);
+      pts.push([+x.toFixed(4), +z.toFixed(4)]); psis.push(psi);
+    }
+    return { pts, psis };
+  }
+
+  function steerStep(n) {
+    const session = ST.session, from = ST.next;
+    const { pts, psis } = predict(n + ST.lookahead);
+    const t0 = performance.now(), sentAt = ST.clock;
+    ST.inflight = (async () => {
+      try {
+        const r = await (await api("/api/steer/step", { session, from, samples: n, ahead: pts })).json();
+        if (session !== ST.session) return;
+        for (let i = 0; i < r.positions.length; i++) {
+          const c = r.curve[i], prev = ST.curve[ST.curve.length - 1];
+          if (prev) ST.walked += Math.hypot(c[0] - prev[0], c[1] - prev[1]);
+          ST.samples.push(r.positions[i]); ST.curve.push(c);
+        }
+        const drop = ST.samples.length - KEEP;
+        if (drop > 0) { ST.samples.splice(0, drop); ST.curve.splice(0, drop); ST.base += drop; }
+        const used = r.next - from;  // predicted points now walked
+        if (used > 0) ST.psi = psis[used - 1];
+        ST.next = r.next; ST.lastPoint = r.last_point; ST.ahead = pts.slice(Math.max(0, used));
+        ST.style = r.style; ST.blend = r.blend[r.blend.length - 1];
+        ST.serverMs = r.server_ms.total;
+        // the first step compiles (once per server): not a round trip to plan by
+        if (r.index0 > 0) ST.rtt = 0.8 * ST.rtt + 0.2 * Math.min(1, (performance.now() - t0) / 1000);
+        if (ST.record) ST.record.push({ index0: r.index0, positions: r.positions, curve: r.curve, blend: r.blend,
+                                        style: r.style, sentAt, answeredAt: ST.clock, omega: ST.omega });
+      } catch (e) {
+        if (session !== ST.session) return;
+        ST.retryAt = performance.now() + 500;
+        if (e.status === 404) {  // dropped by the server (idle too long, or restarted): a new walker from here
+          ST.session = null;
+          setStatus("the server had dropped this walker; walking on with a new one");
+          startSteer();
+        } else showError("steer: " + e.message);
+      } finally {
+        if (session === ST.session || !ST.session) ST.inflight = null;
+      }
+    })();
+    return ST.inflight;
+  }
+
+  // a step when the buffer runs low (one at a time); returns the step running, if any
+  function pump() {
+    if (!ST.session || ST.starting) return null;
+    if (ST.inflight || performance.now() < ST.retryAt) return ST.inflight;
+    const buffered = emitted() - 1 - ST.clock;
+    if (buffered >= bufferTarget()) return null;
+    return steerStep(clamp(Math.ceil(bufferTarget() - buffered) + 1, MIN_STEP, ST.maxSamples));
+  }
+
+  // the edited style (the style panel's, as in draw mode) to the walker, which blends to it
+  async function steerStyle() {
+    const style = styleString(S.panels[S.active]), { z, seed } = steerZ();
+    const key = `${style}|${z}|${seed}`;
+    if (!ST.session || ST.styleBusy || !style || key === ST.styleKey) return;
+    ST.styleBusy = true;
+    const session = ST.session;
+    try {
+      await api("/api/steer/style", { session, style, z, seed });
+      if (session === ST.session) showError(null);
+    } catch (e) {
+      if (session === ST.session) showError(e.message);  // walking on in the style it had
+    } finally {
+      ST.styleKey = key;  // not sent again until edited
+      ST.styleBusy = false;
+    }
+    steerStyle();  // edited meanwhile
+  }
+
+  async function startSteer() {
+    if (ST.session || ST.starting) return;
+    const style = styleString(S.panels[S.active]), { z, seed } = steerZ();
+    if (!style) { showError("pick a style first"); return; }
+    ST.starting = true;
+    renderSteer();
+    const slow = setTimeout(() => setStatus("starting… the first walker compiles the generator for its window, once"), 700);
+    try {
+      const r = await (await api("/api/steer/start", {
+        style, z, seed, start: ST.lastPoint, heading: [Math.cos(ST.psi), Math.sin(ST.psi)], speed: ST.speed,
+      })).json();
+      Object.assign(ST, { session: r.session, fps: r.fps, lookahead: r.lookahead, maxSamples: r.max_samples,
+                          next: r.next, lastPoint: r.last_point, samples: [], curve: [], ahead: [], base: 0,
+                          clock: 0, style: r.style, blend: 1, styleKey: `${style}|${z}|${seed}`, retryAt: 0 });
+      showError(null); setStatus("");
+      $("hint").hidden = true;
+    } catch (e) {
+      showError(e.message); setStatus("");
+    } finally {
+      clearTimeout(slow);
+      ST.starting = false;
+      renderSteer();
+    }
+  }
+
+  function stopSteer() {
+    const session = ST.session;
+    ST.session = null; ST.inflight = null; ST.held.clear();
+    if (session) api("/api/steer/stop", { session }).catch(() => {});
+    renderSteer();
+  }
+
+  // the clock: real time (tests: tick), never past the samples that are here
+  function steerFrame(dt) {
+    if (!ST.driven) {
+      steerInput(dt);
+      if (S.playing && ST.session && ST.samples.length) {
+        const end = emitted() - 1, to = ST.clock + dt * ST.fps;
+        if (to > end) ST.stalls++;
+        ST.clock = Math.max(ST.clock, Math.min(to, end));
+      }
+    }
+    pump();
+    const pose = steerPose();
+    if (pose) { floor.cx = pose[0][0]; floor.cz = pose[0][2]; floor.half = 6; }
+  }
+
+  // tests: moves the clock by dt seconds (the input too) once the samples under it are here
+  async function tick(dt) {
+    if (!ST.session) throw new Error("no walker: start one first");
+    steerInput(dt);
+    ST.clock += dt * ST.fps;
+    const t0 = performance.now();
+    while (emitted() - 1 < ST.clock) {
+      const p = pump();
+      if (p) await p; else await new Promise((res) => setTimeout(res, 20));
+      if (!ST.session) throw new Error("the walker stopped");
+      if (performance.now() - t0 > 60000) throw new Error("no samples for 60 s");
+    }
+    pump();
+    return steerView();
+  }
+
+  function steerView() {
+    const pose = steerPose();
+    return { clock: ST.clock, emitted: emitted(), root: pose && pose[0], speed: ST.speed, omega: ST.omega,
+             buffered: emitted() - 1 - ST.clock, target: bufferTarget(), rtt: ST.rtt, stalls: ST.stalls,
+             style: ST.style, blend: ST.blend, drawn: S.frameCount, camera: ST.cam, session: !!ST.session };
+  }
+
+  function renderSteer() {
+    const go = $("steer-go");
+    go.textContent = ST.session ? "Stop" : ST.starting ? "Starting…" : "Start walking";
+    go.disabled = ST.starting;
+    if (S.mode === "steer" && !ST.session) {
+      $("hint").textContent = "Start walking, then steer with the arrow keys (or WASD, or a gamepad).";
+      $("hint").hidden = false;
+    }
+    renderSteerInfo();
+  }
+
+  function renderSteerInfo() {
+    const deg = Math.round(((ST.psi * 180 / Math.PI) % 360 + 360) % 360);
+    $("steer-info").textContent = ST.session
+      ? `${ST.speed.toFixed(2)} m/s · ${deg}° · ${ST.serverMs.toFixed(0)} ms` : "";
+    if (S.mode === "steer") {
+      $("speed").value = ST.speed;
+      $("speed-value").textContent = `${ST.speed.toFixed(2)} m/s`;
+    }
+  }
+
+  function setWalkMode(mode) {
+    if (mode === S.mode) return;
+    S.mode = mode;
+    document.body.classList.toggle("steering", mode === "steer");
+    $("walk-draw").classList.toggle("active", mode === "draw");
+    $("walk-steer").classList.toggle("active", mode === "steer");
+    S.follow.smoothYaw = [];
+    if (mode === "steer") {
+      ST.speed = parseFloat($("speed").value);
+    } else {
+      stopSteer();
+      $("hint").textContent = HINT;
+      $("hint").hidden = !!S.result;
+      fitFloor(S.result ? S.result.curve : pathPoints());
+    }
+    renderSteer();
+    drawFloor();
+  }
+
+  const HINT = $("hint").textContent;
+  $("walk-draw").onclick = () => setWalkMode("draw");
+  $("walk-steer").onclick = () => setWalkMode("steer");
+  $("steer-go").onclick = () => {
+    $("steer-go").blur();  // the keys steer, they do not press the button
+    if (ST.session) stopSteer(); else startSteer();
+  };
+  const typing = () => ["INPUT", "SELECT", "TEXTAREA"].includes(document.activeElement.tagName);
+  document.addEventListener("keydown", (ev) => {
+    const a = KEYS[ev.code];
+    if (S.mode !== "steer" || !a || typing() || ev.ctrlKey || ev.metaKey || ev.altKey) return;
+    ev.preventDefault();  // no scrolling
+    ST.held.add(a);
+  });
+  document.addEventListener("keyup", (ev) => { const a = KEYS[ev.code]; if (a) ST.held.delete(a); });
+  window.addEventListener("blur", () => ST.held.clear());  // a key released elsewhere is not held
+  window.addEventListener("pagehide", () => {
+    if (ST.session) {
+      navigator.sendBeacon("/api/steer/stop", new Blob([JSON.stringify({ session: ST.session })],
+                                                       { type: "application/json" }));
+    }
+  });
+
+  // ------------------------------------------------------------------------------------------
   // Controls
   // ------------------------------------------------------------------------------------------
   function setPlaying(on) { S.playing = on; $("play").textContent = on ? "❚❚" : "▶"; }
@@ -827,6 +1142,7 @@
   $("motion").onchange = (ev) => { S.selected = parseInt(ev.target.value, 10) || 0; };
   $("speed").addEventListener("input", (ev) => {
     $("speed-value").textContent = `${parseFloat(ev.target.value).toFixed(2)} m/s`;
+    if (S.mode === "steer") ST.speed = parseFloat(ev.target.value);
     drawFloor(); changed();
   });
   $("z-mode").onchange = () => { $("k-wrap").style.display = $("z-mode").value === "k" ? "" : "none"; changed(); };
@@ -864,6 +1180,8 @@
     }
     renderStyle();
     refreshMotions();
+    ST.speed = S.model.default_speed;
+    renderSteer();
     drawFloor();
     await characterReady;
     try {
@@ -890,6 +1208,16 @@
     get drawn() { return S.frameCount; },
     get character() { return S.char.loaded ? { ...S.char.info, bytes: S.char.bytes, rig: S.rig } : null; },
     generate,
+    steer: {
+      get state() { return ST; },
+      view: steerView,
+      tick,
+      start: startSteer,
+      stop: stopSteer,
+      drive(on) { ST.driven = !!on; },  // the clock moves only by tick()
+      record(on) { ST.record = on ? [] : null; },
+      drain() { const r = ST.record || []; if (ST.record) ST.record = []; return r; },
+    },
   };
   init();
 })();
