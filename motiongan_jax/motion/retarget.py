@@ -280,7 +280,7 @@ def retarget(positions_m, joint_names, parents, rest_offsets_m, rig: rigs.Rig, f
         bend = knee_s - hip_s
         bend = bend - np.sum(bend * line, axis=-1, keepdims=True) * line
         if role.endswith("toe"):
-            bend = bend + 1e-3 * ik._unit(pos[:, c_src] - ankle_s)[0]
+            bend = bend + 1e-6 * ik._unit(pos[:, c_src] - ankle_s)[0]
         knee, ankle = two_bone(X[:, h], X[:, h] + bend, goal_c + X[:, a] - X[:, c],
                                np.linalg.norm(rest_vec[k]), np.linalg.norm(rest_vec[a]))
         directions[:, k] = ik._unit(knee - X[:, h])[0]
