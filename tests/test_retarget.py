@@ -310,8 +310,8 @@ def home_rig(source, motion):
                          [("bandai", n) for n in rigs.BUILTIN_RIGS] + [("cmu", "mixamo"), ("cmu", "smpl")])
 def test_round_trip_keeps_every_joint_within_1_cm(source, name):
     """A walk onto a built-in rig and back onto its own skeleton: every joint the rig's bone
-    directions define within 1 cm in every frame (2 mm at most: each step inverts where the rig's
-    legs reach the walk's footprints). The toy walk's knees stay bent 10 degrees or more, as
+    directions define within 1 cm in every frame (about 2 mm at most: each step inverts where the
+    rig's legs reach the walk's footprints). The toy walk's knees stay bent 10 degrees or more, as
     people's do: a straight leg's stride is out of reach of a rig whose legs are short for its
     height, and the next test shows what is lost then. The Bandai rig is the shortest built-in
     one; the CMU skeleton is taller than the Bandai and SMPL rigs."""
