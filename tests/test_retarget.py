@@ -348,6 +348,33 @@ def test_round_trip_loses_only_what_the_rig_cannot_reach(walk, name):
         assert 0.3 < stretched.mean() < 0.7 and err[stretched].max() > 0.01
 
 
+def test_a_skeleton_whose_rest_pose_folds_its_legs_walks_at_its_standing_height():
+    """Bandai's files fold the legs sideways at rest (each joint's offsets in a turned frame), so a
+    rest pose says nothing of heights; the standing pelvis height then comes from the legs' lengths.
+    The Bandai walk with its rest offsets so folded (the same bones, the same walk) goes onto a rig
+    at its pelvis height within 3 % of where the skeleton standing at rest puts it, its feet on the
+    same footprints."""
+    from scipy.spatial.transform import Rotation
+
+    pos, layout, _ = toy_walk(skeleton="bandai", knee_min_deg=10.0)
+    turns = Rotation.random(len(layout.parents), random_state=0).as_matrix()
+    rest = np.asarray(layout.rest_offsets_m)
+    folded = np.array([rest[j] if p < 0 else turns[p] @ rest[j] for j, p in enumerate(layout.parents)])
+    src = retarget.source_roles(layout.joint_names, layout.parents, rest)
+    folded_world = np.zeros_like(folded)
+    for j, p in enumerate(layout.parents):
+        folded_world[j] = folded[j] + (folded_world[p] if p >= 0 else 0.0)
+    height, floor = retarget.standing(folded_world, layout.parents, src)
+    assert floor is None and abs(height / 0.91 - 1) < 0.03  # the rig stands 0.91 m at the pelvis
+    rig = rigs.load_rig("smpl")
+    upright, bent = (retarget.retarget(pos, layout.joint_names, layout.parents, r, rig, FPS) for r in (rest, folded))
+    ratio = bent.positions_m[:, rig.roles["pelvis"], 1] / upright.positions_m[:, rig.roles["pelvis"], 1]
+    np.testing.assert_allclose(ratio, 0.91 / height, rtol=1e-9)
+    for role in ("pelvis", "left_toe", "right_toe"):
+        np.testing.assert_allclose(bent.positions_m[:, rig.roles[role], [0, 2]],
+                                   upright.positions_m[:, rig.roles[role], [0, 2]], atol=1e-6)
+
+
 def test_real_bandai_walks_round_trip(shared_data):
     """Bandai Namco's own clips (their rest pose folds the legs sideways, so the skeleton's standing
     height comes from its leg lengths): onto each built-in rig and back onto the clip's skeleton,
