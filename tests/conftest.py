@@ -271,46 +271,65 @@ def repo() -> Path:
 # a walk without a model
 
 
-def toy_walk(frames: int = 45, fps: float = 15.0):
-    """(positions (F, J, 3) metres on the embedded dataset's layout, layout, the bvh.Motion they are
-    the forward kinematics of): a cheap stand-in for a generated walk on the project's own
-    CMU-named skeleton, its zero-length joints at rest. Hips, knees and arms swing at 0.9 Hz, the
-    body turns left, and the root moves so that the lower toe stays where it is (feet planted), the
-    lowest joint on the floor."""
+# joint names of the toy walk on each skeleton it can walk (the root's rotation turns the body)
+_TOY_NAMES = {
+    "cmu": {"root": "Hips", "turn": "Hips", "spine": "Spine", "head": "Head",
+            **{f"{s}_{k}": f"{side}{n}" for s, side in (("l", "Left"), ("r", "Right"))
+               for k, n in (("hip", "UpLeg"), ("knee", "Leg"), ("ankle", "Foot"), ("toe", "ToeBase"),
+                            ("arm", "Arm"), ("forearm", "ForeArm"))}},
+    "bandai": {"root": "joint_Root", "turn": "joint_Root", "spine": "Spine", "head": "Head",
+               **{f"{s}_{k}": f"{n}_{s.upper()}" for s in ("l", "r")
+                  for k, n in (("hip", "UpperLeg"), ("knee", "LowerLeg"), ("ankle", "Foot"), ("toe", "Toes"),
+                               ("arm", "UpperArm"), ("forearm", "LowerArm"))}},
+}
+
+
+def toy_walk(frames: int = 45, fps: float = 15.0, skeleton: str = "cmu", knee_min_deg: float = 0.0):
+    """(positions (F, J, 3) metres on the skeleton's layout, layout, the bvh.Motion they are the
+    forward kinematics of): a cheap stand-in for a generated walk, on the project's own CMU-named
+    skeleton (the embedded dataset's, its zero-length joints at rest) or, with skeleton="bandai",
+    the built-in Bandai-named rig. Hips, knees and arms swing at 0.9 Hz, the body turns left, and
+    the root moves so that the lower toe stays where it is (feet planted), the lowest joint on the
+    floor. The knees straighten fully in stance unless `knee_min_deg` keeps them bent that much, as
+    people's do (six of Bandai's clips: 3-30 degrees at their straightest; the shipped model's walk 11)."""
     import numpy as np
 
     from motiongan_jax.data import synthetic
-    from motiongan_jax.motion import bvh, kinematics, representation
+    from motiongan_jax.motion import bvh, kinematics, representation, rigs
 
-    sk = synthetic.cmu_skeleton()
+    if skeleton == "cmu":
+        sk, units = synthetic.cmu_skeleton(), synthetic.UNITS_TO_M
+    else:
+        sk, units = rigs.builtin_skeleton(skeleton)
+    name = _TOY_NAMES[skeleton]
     t = np.arange(frames) / fps
     ph = 2 * np.pi * 0.9 * t
     values = np.zeros((frames, sk.num_channels))
     sl = dict(zip(sk.names, sk.channel_slices()))
 
-    def put(name, axis, deg):  # channels Zrotation Yrotation Xrotation (root: after 3 positions)
-        s = sl[name]
-        values[:, s.start + (3 if name == "Hips" else 0) + "ZYX".index(axis)] = deg
+    def put(role, axis, deg):  # channels Zrotation Yrotation Xrotation (root: after 3 positions)
+        s = sl[name[role]]
+        values[:, s.start + (3 if name[role] == name["root"] else 0) + "ZYX".index(axis)] = deg
 
-    put("Hips", "Y", np.degrees(0.35 * t))  # turning left
-    for side, sign in (("Left", 1.0), ("Right", -1.0)):
-        put(f"{side}UpLeg", "X", -25 * sign * np.sin(ph))
-        put(f"{side}Leg", "X", 50 * np.maximum(0, sign * np.cos(ph)))
-        put(f"{side}Foot", "X", -10 * sign * np.sin(ph))
-        put(f"{side}Arm", "X", 20 * sign * np.sin(ph))
-        put(f"{side}Arm", "Z", -sign * 70.0)  # arms down from the T-pose
-        put(f"{side}ForeArm", "Y", sign * 20 * (1 + np.sin(ph)))
-    put("Spine", "Y", 5 * np.sin(ph))
-    put("Head", "X", 8.0)
+    put("turn", "Y", np.degrees(0.35 * t))  # turning left
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        put(f"{side}_hip", "X", -25 * sign * np.sin(ph))
+        put(f"{side}_knee", "X", knee_min_deg + (50 - knee_min_deg) * np.maximum(0, sign * np.cos(ph)))
+        put(f"{side}_ankle", "X", -10 * sign * np.sin(ph))
+        put(f"{side}_arm", "X", 20 * sign * np.sin(ph))
+        put(f"{side}_arm", "Z", -sign * 70.0)  # arms down from the T-pose
+        put(f"{side}_forearm", "Y", sign * 20 * (1 + np.sin(ph)))
+    put("spine", "Y", 5 * np.sin(ph))
+    put("head", "X", 8.0)
     rel = kinematics.world_positions(bvh.Motion(sk, 1.0 / fps, values))  # the root at the origin
-    toes = rel[:, [sk.names.index("LeftToeBase"), sk.names.index("RightToeBase")]]
+    toes = rel[:, [sk.names.index(name["l_toe"]), sk.names.index(name["r_toe"])]]
     stance = np.argmin(toes[..., 1], axis=1)
     step = toes[1:, :, [0, 2]] - toes[:-1, :, [0, 2]]
     moved = -step[np.arange(frames - 1), stance[1:]]
-    root = values[:, sl["Hips"].start:sl["Hips"].start + 3]
+    root = values[:, sl[name["root"]].start:sl[name["root"]].start + 3]
     root[1:, [0, 2]] = np.cumsum(moved, axis=0)
     root[:, 1] = -rel[..., 1].min(axis=1)
     motion = bvh.Motion(sk, 1.0 / fps, values)
-    layout = representation.layout_from_skeleton(sk, synthetic.UNITS_TO_M)
-    world = kinematics.world_positions(motion) * synthetic.UNITS_TO_M
+    layout = representation.layout_from_skeleton(sk, units)
+    world = kinematics.world_positions(motion) * units
     return world[:, list(layout.source_index)], layout, motion

@@ -8,23 +8,29 @@ matter):
    segment from its nearest matched ancestor in the rig to it; the rig's joints in between, and
    every unmatched joint, keep their rest rotation.
 2. Directions, not lengths. The segment's direction is the source's between the same two roles;
-   its length is the rig's own rest length. The pelvis keeps the source's floor position (the root
-   path stays on the user's curve) and its height scaled by the ratio of the two skeletons'
-   pelvis heights at rest.
+   its length is the rig's own rest length. Heights over the floor (y = 0) are scaled by the ratio
+   of the two skeletons' standing pelvis heights (`standing`: from the rest pose where it stands,
+   else from the legs' lengths), floor positions are not: the pelvis keeps the source's floor
+   path (the root path stays on the user's curve) at the scaled height.
 3. Rotations, top down. A matched joint with one matched child turns by the minimal rotation that
    takes its rest segment to the wanted direction (no twist relative to its parent); one with
    several (pelvis, chest) takes the best-fit rotation of them all (`ik.kabsch`), so its children
    land where its rotation puts them. The positions are the rig's forward kinematics by
    construction: bone lengths are the rig's.
-4. Floor and feet. The walk is lifted so that its lowest matched joint is on the floor as at rest
-   (the 5th percentile over frames, as `generate.walk` does). Where a source foot is planted
-   (toe low and slow: `contacts`), the rig's contact point (the ball of its foot, or its ankle if
-   no toe is matched) is pinned to its mean floor position over that stance (the correction faded in
-   and out over `PIN_BLEND` frames), the ankle moved with it, and each leg is solved again by two-bone IK in the
-   plane of its knee, so a rig with other proportions does not slide its feet; an ankle out of the
-   leg's reach goes as far as the straightened leg allows.
-`foot_report` measures the foot skate and the floor penetration, the same way for the source and
-the retargeted walk, for the notes that generate.py prints.
+4. Feet. The rig's contact point (the ball of its foot, or its ankle if no toe is matched) goes
+   where the source's does, in every frame: the same floor position, the height scaled as in 2.
+   (from each one's rest clearance). Where the source's foot is planted (low and slow:
+   `contacts`, its height band scaled with the skeleton) the point is pinned to its median floor
+   position over that stance (the correction faded in and out over `PIN_BLEND` frames), so the
+   source's own skate is not copied. The ankle keeps the source's foot direction, and each leg is
+   solved by two-bone IK with the knee on the side of the hip-ankle line that the source's knee
+   is on; an ankle out of the leg's reach goes as far as the straightened leg allows.
+Both feet and pelvis follow the source's, so a rig of other proportions does not slide its feet,
+and a walk taken onto a rig and back returns to itself wherever the rig's legs reached (the
+steps 2-4 invert exactly; a shorter rig cannot take a straight leg's full stride, and there the
+walk loses what the rig could not reach). `foot_report` measures the foot skate and the floor
+penetration, the same way for the source and the retargeted walk, for the notes that generate.py
+prints.
 """
 
 from __future__ import annotations
@@ -36,10 +42,15 @@ import numpy as np
 from motiongan_jax.motion import bvh, ik, rigs
 
 CONTACT_BAND_M = 0.03  # a foot is low when within this of its own 5th-percentile height
+# retarget scales the band with the skeleton's standing pelvis height over this, so a walk and
+# its copy on a rig of another size find the same stances
+BAND_PELVIS_M = 0.95
 CONTACT_SPEED_MPS = 0.5  # ... and planted when also slower than this (horizontally)
 MIN_STANCE = 3  # frames: shorter low-and-slow runs are not pinned
 PIN_BLEND = 2  # frames either side of a stance over which the pin fades in and out
 FLOOR_PERCENTILE = 5.0
+STANDING_TILT_DEG = 30.0  # a rest pose stands when every thigh and shin is this close to straight down
+STANDING_PER_LEG = 1.16  # pelvis height / (thigh + shin) standing: 1.14-1.17 on CMU's and the built-in skeletons
 _EPS = 1e-9
 
 
@@ -86,12 +97,12 @@ def output_skeleton(skeleton: bvh.Skeleton) -> bvh.Skeleton:
 # Feet: contacts, skate, penetration
 
 
-def contacts(feet_Fx2x3, fps: float, *, speed: bool = True) -> np.ndarray:
-    """(F, 2) bool: the foot is low (within CONTACT_BAND_M of its own 5th-percentile height) and,
+def contacts(feet_Fx2x3, fps: float, *, speed: bool = True, band_m: float = CONTACT_BAND_M) -> np.ndarray:
+    """(F, 2) bool: the foot is low (within `band_m` of its own 5th-percentile height) and,
     with `speed`, slower than CONTACT_SPEED_MPS on the floor (central differences)."""
     feet = np.asarray(feet_Fx2x3, np.float64)
     h = feet[..., 1]
-    low = h < np.percentile(h, FLOOR_PERCENTILE, axis=0) + CONTACT_BAND_M
+    low = h < np.percentile(h, FLOOR_PERCENTILE, axis=0) + band_m
     if not speed or len(feet) < 2:
         return low
     v = np.linalg.norm(np.gradient(feet[..., [0, 2]], axis=0), axis=-1) * fps
@@ -125,15 +136,16 @@ def _stances(mask_F: np.ndarray) -> list[tuple[int, int]]:
 
 
 def pin_feet(point_Fx3, planted_F) -> np.ndarray:
-    """Goals for a contact point: on the floor (x, z), each stance's mean position held over the
-    stance; the correction this makes at the stance's first (last) frame fades out linearly over
-    PIN_BLEND frames before (after) it, so the swing keeps its own motion; the point's own path
-    elsewhere. Heights stay the point's own (a foot rolling over its ball lifts it a little)."""
+    """Goals for a contact point: on the floor (x, z), each stance's median position held over the
+    stance (a few frames at its ends that differ, such as those a shorter rig could not reach, do
+    not move it); the correction this makes at the stance's first (last) frame fades out linearly
+    over PIN_BLEND frames before (after) it, so the swing keeps its own motion; the point's own
+    path elsewhere. Heights stay the point's own (a foot rolling over its ball lifts it a little)."""
     point = np.asarray(point_Fx3, np.float64)
     goal = point.copy()
     weight = np.zeros(len(point))
     for a, b in _stances(planted_F):
-        mean = point[a:b].mean(axis=0) * np.array([1.0, 0.0, 1.0])
+        mean = np.median(point[a:b], axis=0) * np.array([1.0, 0.0, 1.0])
         goal[a:b] = mean + point[a:b] * np.array([0.0, 1.0, 0.0])
         weight[a:b] = 1.0
         for edge, frames in ((a, range(a - 1, a - 1 - PIN_BLEND, -1)), (b - 1, range(b, b + PIN_BLEND))):
@@ -190,6 +202,24 @@ def _solve(parent_m, rest_vec, directions, pelvis_pos):
     return G, X
 
 
+def standing(rest_m, parents, roles) -> tuple[float, float | None]:
+    """(pelvis height, floor height or None) of a skeleton standing, metres, from its rest pose
+    (world positions): where the rest pose stands (every thigh and shin within STANDING_TILT_DEG of
+    straight down), the pelvis's height over the lowest joint below it, and that joint's height;
+    otherwise (a rest pose with the legs folded, as Bandai's files have) STANDING_PER_LEG times the
+    mean thigh + shin length, and no floor (rest heights say nothing then)."""
+    rest = np.asarray(rest_m, np.float64)
+    legs = [(roles[f"{s}_hip"], roles[f"{s}_knee"], roles[f"{s}_ankle"]) for s in ("left", "right")]
+    bones = [rest[b] - rest[a] for h, k, a_ in legs for a, b in ((h, k), (k, a_))]
+    down = all(-v[1] > np.cos(np.radians(STANDING_TILT_DEG)) * np.linalg.norm(v) for v in bones)
+    if down:
+        pelvis = roles["pelvis"]
+        body = [j for j in range(len(rest)) if j == pelvis or rigs.descends(parents, j, pelvis)]
+        floor = float(rest[body, 1].min())
+        return float(rest[pelvis, 1] - floor), floor
+    return STANDING_PER_LEG * float(np.mean([np.linalg.norm(v) for v in bones]) * 2), None
+
+
 def retarget(positions_m, joint_names, parents, rest_offsets_m, rig: rigs.Rig, fps: float) -> Retargeted:
     """The walk `positions_m` (F, J, 3, metres, the source layout's joints) on `rig` (module doc)."""
     pos = np.asarray(positions_m, np.float64)
@@ -212,12 +242,13 @@ def retarget(positions_m, joint_names, parents, rest_offsets_m, rig: rigs.Rig, f
     rest_w = rig.rest_world_m()
     rest_vec = np.array([rest_w[j] - (rest_w[joints[p]] if p >= 0 else rest_w[j]) for j, p in zip(joints, parent_m)])
 
-    # 2. directions from the source, the pelvis on the source's floor path at the rig's height
+    # 2. directions from the source; heights over the floor scaled by the standing pelvis heights
     src_rest = np.zeros((len(joint_names), 3))
     for k, p in enumerate(parents):
         if p >= 0:
             src_rest[k] = src_rest[p] + np.asarray(rest_offsets_m[k], np.float64)
-    scale = (rest_w[joints[0], 1] - rest_w[:, 1].min()) / (src_rest[src["pelvis"], 1] - src_rest[:, 1].min())
+    (h_rig, floor_rig), (h_src, floor_src) = standing(rest_w, sk.parents, rig.roles), standing(src_rest, parents, src)
+    scale = h_rig / h_src
     F = len(pos)
     directions = np.zeros((F, len(joints), 3))
     for m, (j, p) in enumerate(zip(joints, parent_m)):
@@ -228,23 +259,30 @@ def retarget(positions_m, joint_names, parents, rest_offsets_m, rig: rigs.Rig, f
     pelvis = pos[:, src["pelvis"]] * np.array([1.0, scale, 1.0])
     G, X = _solve(parent_m, rest_vec, directions, pelvis)
 
-    # 4. floor: the lowest matched joint as high above the floor as at rest
-    clearance = rest_w[joints, 1].min() - rest_w[:, 1].min()
-    lift = clearance - np.percentile(X[..., 1].min(axis=1), FLOOR_PERCENTILE)
-    pelvis = pelvis + np.array([0.0, lift, 0.0])
-    X[..., 1] += lift
-    # feet: pin the rig's feet where the source's are planted, legs by two-bone IK
+    # 4. feet: the rig's contact point where the source's is, pinned where that is planted
     for side in ("left", "right"):
-        foot_src = src.get(f"{side}_toe", src[f"{side}_ankle"])
-        planted = contacts(pos[:, [foot_src, foot_src]], fps)[:, 0]
         h, k, a = (slot[rig.roles[f"{side}_{r}"]] for r in ("hip", "knee", "ankle"))
         if parent_m[k] != h or parent_m[a] != k:
             continue
-        # the contact point (the ball of the foot where both have one): pinned, the ankle moved with it
-        toe_role = f"{side}_toe"
-        c = slot[rig.roles[toe_role]] if toe_role in matched else a
-        goal = X[:, a] + pin_feet(X[:, c], planted) - X[:, c]
-        knee, ankle = two_bone(X[:, h], X[:, k], goal, np.linalg.norm(rest_vec[k]), np.linalg.norm(rest_vec[a]))
+        role = f"{side}_toe" if f"{side}_toe" in matched else f"{side}_ankle"
+        c, c_src = slot[rig.roles[role]], src[role]
+        planted = contacts(pos[:, [c_src, c_src]], fps, band_m=CONTACT_BAND_M * h_src / BAND_PELVIS_M)[:, 0]
+        clear_rig, clear_src = (0.0 if fl is None else float(r[j, 1] - fl)  # the point's rest height over the floor
+                                for r, j, fl in ((rest_w, rig.roles[role], floor_rig), (src_rest, c_src, floor_src)))
+        goal_c = pin_feet(pos[:, c_src], planted)
+        goal_c[:, 1] = scale * (goal_c[:, 1] - clear_src) + clear_rig
+        # the knee's side of the hip-ankle line is the source's own (its knee's offset from its own
+        # line), not the source's thigh direction seen from the rig's line: the two lines differ,
+        # and near a straight leg that difference would swing the knee. A hint towards the toes
+        # bends a leg the source holds straight.
+        hip_s, knee_s, ankle_s = (pos[:, src[f"{side}_{r}"]] for r in ("hip", "knee", "ankle"))
+        line = ik._unit(ankle_s - hip_s)[0]
+        bend = knee_s - hip_s
+        bend = bend - np.sum(bend * line, axis=-1, keepdims=True) * line
+        if role.endswith("toe"):
+            bend = bend + 1e-6 * ik._unit(pos[:, c_src] - ankle_s)[0]
+        knee, ankle = two_bone(X[:, h], X[:, h] + bend, goal_c + X[:, a] - X[:, c],
+                               np.linalg.norm(rest_vec[k]), np.linalg.norm(rest_vec[a]))
         directions[:, k] = ik._unit(knee - X[:, h])[0]
         directions[:, a] = ik._unit(ankle - knee)[0]
     G, X = _solve(parent_m, rest_vec, directions, pelvis)
