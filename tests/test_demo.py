@@ -396,11 +396,11 @@ from motiongan_jax.demo import steer as steer_lib  # noqa: E402
 
 @pytest.fixture()
 def steer_app(engine):
-    """A fresh app (its own walkers) whose steering clock the test moves."""
+    """A fresh app (its own walkers) whose walkers' clock the test moves."""
     app = server.create_app(engine)
     now = [1000.0]
-    app.config["steering"].clock = lambda: now[0]
-    return app.test_client(), app.config["steering"], now
+    app.config["walkers"].clock = lambda: now[0]
+    return app.test_client(), app.config["walkers"], now
 
 
 def _ahead(last, heading, n, speed=SPEED, turn=0.0):
@@ -417,7 +417,7 @@ def _ahead(last, heading, n, speed=SPEED, turn=0.0):
 def test_steer_streams_what_a_walker_fed_the_same_path_makes(steer_app, engine):
     """Steps through the API emit exactly what generate.stream.Walker emits for the same path
     (to the rounding of the JSON), contiguous from sample 0, on the path that was sent."""
-    client, steering, _ = steer_app
+    client, walkers, _ = steer_app
     r = _post(client, "/api/steer/start", {"style": "happy", "speed": SPEED, "start": [1.0, -2.0]})
     assert r.status_code == 200, r.get_json()
     st = r.get_json()
@@ -485,7 +485,7 @@ def test_steer_style_change_blends_over_a_second(steer_app, engine):
 
 
 def test_steer_walkers_are_bounded_in_number_and_dropped_when_idle(steer_app):
-    client, steering, now = steer_app
+    client, walkers, now = steer_app
     ids = []
     for _ in range(steer_lib.MAX_WALKERS):
         r = _post(client, "/api/steer/start", {"style": "Happy"})

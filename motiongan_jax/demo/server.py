@@ -172,16 +172,16 @@ def create_app(engine: engine_lib.Engine) -> Flask:
         return app.response_class(data, mimetype=mime,
                                   headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
-    steering = steer_lib.Steering(engine)
-    app.config["steering"] = steering
+    walkers = steer_lib.Steering(engine)
+    app.config["walkers"] = walkers
 
     @app.get("/api/steer")
     def steer_stats():
-        return jsonify(steering.stats())
+        return jsonify(walkers.stats())
 
     @app.post("/api/steer/<action>")
     def steer(action):
-        act = {"start": steering.start, "step": steering.step, "style": steering.style, "stop": steering.stop}
+        act = {"start": walkers.start, "step": walkers.step, "style": walkers.style, "stop": walkers.stop}
         if action not in act:
             return jsonify(error=f"unknown steer action {action[:40]!r}; known: {', '.join(act)}"), 404
         t0 = time.perf_counter()

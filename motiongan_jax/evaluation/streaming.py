@@ -108,19 +108,18 @@ def stream_block(ctx, seed: int) -> dict:
     wins = {"whole": [], "stream": []}
     seams = {"whole": {k: [] for k in SEAM_KEYS}, "stream": {k: [] for k in SEAM_KEYS}}
     labels = []
+    gait_clock = model_apply.has_gait_phase(ctx.state)
     for ci, c in enumerate(curves):
         clip = next(v for v in ctx.val_clips if v.source == c.source)
         style = ctx.style_names.index(clip.label.style)
         k_z, k_p = jax.random.split(jax.random.fold_in(key, ci))
         w = np.asarray(styles.latent_codes(ctx.state, np.array([style], np.int32),
                                            jax.random.normal(k_z, (1, Z), jnp.float32)))
-        phase0 = float(jax.random.uniform(k_p, (), maxval=2 * np.pi)) if model_apply.has_gait_phase(ctx.state) else 0.0
-        whole = walk.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, w,
-                                     np.array([phase0]) if model_apply.has_gait_phase(ctx.state) else None)
+        phase0 = float(jax.random.uniform(k_p, (), maxval=2 * np.pi)) if gait_clock else 0.0
+        whole = walk.generate_motion(ctx.state, ctx.layout, c.curve_Lx3, w, np.array([phase0]) if gait_clock else None)
         streamed, starts = stream_walk(ctx.state, ctx.layout, c.curve_Lx3, w[0], ctx.sample_rate, phase0)
         vel = trajectory.velocity(c.curve_Lx3[None].astype(np.float32))
-        whole_phase = (None if streamed.phase is None
-                       else model_apply.walked_phase(ctx.state, vel, w, np.array([phase0]))[0])
+        whole_phase = model_apply.walked_phase(ctx.state, vel, w, np.array([phase0]))[0] if gait_clock else None
         for name, joints, phase in (("whole", whole.positions[0], whole_phase),
                                     ("stream", streamed.positions, streamed.phase)):
             rows[name].append(clip_metrics.motion_metrics(joints, None, ctx.layout, ctx.feet, ctx.sample_rate,

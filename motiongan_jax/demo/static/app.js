@@ -1081,7 +1081,7 @@
   function setWalkMode(mode) {
     if (mode === S.mode) return;
     S.mode = mode;
-    document.body.classList.toggle("steering", mode === "steer");
+    document.body.classList.toggle("steer-mode", mode === "steer");
     $("walk-draw").classList.toggle("active", mode === "draw");
     $("walk-steer").classList.toggle("active", mode === "steer");
     S.follow.smoothYaw = [];
