@@ -282,6 +282,20 @@ def edited(replace: dict[int, str | None] | None = None, insert: dict[int, str] 
     return "\n".join(out) + "\n"
 
 
+def test_bounds_are_checked_before_the_frames_are_read():
+    """max_joints counts End Sites; max_frames is the declared count, refused at its line."""
+    assert bvh.parse_bvh(SMALL, max_joints=6, max_frames=3).num_frames == 3
+    with pytest.raises(bvh.BVHError, match=r"^x\.bvh:23: more than 5 joints \(End Sites included\)"):
+        bvh.parse_bvh(SMALL, "x.bvh", max_joints=5)
+    with pytest.raises(bvh.BVHError, match=r"^x\.bvh:31: 3 frames; at most 2 are read"):
+        bvh.parse_bvh(SMALL, "x.bvh", max_frames=2)
+    # a huge declared count with no frames behind it: the bound, not the missing frames
+    huge = SMALL.replace("Frames: 3", "Frames: 123456789012")
+    with pytest.raises(bvh.BVHError, match=r"123456789012 frames; at most 1000 are read"):
+        bvh.parse_bvh(huge, "x.bvh", max_frames=1000)
+    assert bvh.decode("é".encode("latin-1")) == "é" and bvh.decode("é".encode()) == "é"
+
+
 def test_error_is_a_value_error():
     assert issubclass(bvh.BVHError, ValueError)
 

@@ -130,8 +130,11 @@ def _number(tok: str) -> float:
     return float(tok)
 
 
-def parse_bvh(text: str, source: str = "<string>") -> Motion:
-    """Parse BVH text. Raises BVHError("{source}:{line}: {problem}") on anything malformed."""
+def parse_bvh(text: str, source: str = "<string>", *, max_joints: int | None = None,
+              max_frames: int | None = None) -> Motion:
+    """Parse BVH text. Raises BVHError("{source}:{line}: {problem}") on anything malformed, and on
+    more joints (End Sites included) than `max_joints` or a declared frame count over `max_frames`
+    (checked before the frames are read: bounds for text from outside, e.g. an upload)."""
     if text.startswith("\ufeff"):
         text = text[1:]
     if "\r" in text:
@@ -156,6 +159,8 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
     def new_joint(name: str, parent: int, kind: str, lineno: int) -> int:
         if name in first_seen:
             raise fail(lineno, f"duplicate joint name {name!r} (first defined at line {first_seen[name]})")
+        if max_joints is not None and len(names) >= max_joints:
+            raise fail(lineno, f"more than {max_joints} joints (End Sites included); at most {max_joints} are read")
         first_seen[name] = lineno
         names.append(name)
         parents.append(parent)
@@ -313,6 +318,8 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
     declared = int(m.group(1))
     if declared == 0:
         raise fail(frames_line, "zero frames: 'Frames: 0'")
+    if max_frames is not None and declared > max_frames:
+        raise fail(frames_line, f"{declared} frames; at most {max_frames} are read")
     line = lines.next_nonblank()
     m = _FRAME_TIME_RE.fullmatch(line.strip()) if line is not None else None
     if m is None:
@@ -379,12 +386,15 @@ def _explain_bad_frames(block, before_line, declared, frames_line, num_channels,
 
 def read_bvh(path: str | os.PathLike) -> Motion:
     """Read one BVH file (UTF-8, falling back to Latin-1). Raises BVHError naming the file."""
-    data = Path(path).read_bytes()
+    return parse_bvh(decode(Path(path).read_bytes()), source=str(path))
+
+
+def decode(data: bytes) -> str:
+    """A BVH file's bytes as text: UTF-8, falling back to Latin-1 (which decodes any bytes)."""
     try:
-        text = data.decode("utf-8")
+        return data.decode("utf-8")
     except UnicodeDecodeError:
-        text = data.decode("latin-1")
-    return parse_bvh(text, source=str(path))
+        return data.decode("latin-1")
 
 
 def read_bvh_dir(
