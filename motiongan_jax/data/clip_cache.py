@@ -63,10 +63,7 @@ def preprocess_clip(path: Path, label: FileLabel, units_to_m: float, start_offse
             layout = layout_from_skeleton(skeleton, units_to_m)
             return Clip(str(path), label, float(z["fps"]), z["root"], z["pose"], layout)
     motion = bvh.parse_bvh(raw.decode("utf-8", errors="strict"), source=str(path))
-    layout = layout_from_skeleton(motion.skeleton, units_to_m)
-    world_m = kinematics.world_positions(motion) * units_to_m
-    root, pose = to_rows(world_m[start_offset:], layout)
-    root, pose = root.astype(np.float32), pose.astype(np.float32)
+    layout, root, pose = motion_rows(motion, units_to_m, start_offset)
     if use_cache:
         cache_file.parent.mkdir(parents=True, exist_ok=True)
         sk = motion.skeleton
@@ -75,6 +72,15 @@ def preprocess_clip(path: Path, label: FileLabel, units_to_m: float, start_offse
                      parents=np.array(sk.parents), offsets=sk.offsets,
                      channels=np.array(json.dumps([list(c) for c in sk.channels])))
     return Clip(str(path), label, motion.fps, root, pose, layout)
+
+
+def motion_rows(motion: bvh.Motion, units_to_m: float, start_offset: int) -> tuple[RowLayout, np.ndarray, np.ndarray]:
+    """(layout, root_Fx3, pose_FxR) of a parsed BVH motion as training reads it: its kept joints,
+    world positions in metres from frame `start_offset` on, float32."""
+    layout = layout_from_skeleton(motion.skeleton, units_to_m)
+    world_m = kinematics.world_positions(motion) * units_to_m
+    root, pose = to_rows(world_m[start_offset:], layout)
+    return layout, root.astype(np.float32), pose.astype(np.float32)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -48,15 +48,21 @@ PHASE_MIN_AMPLITUDE = 0.3  # frames whose step amplitude is below this share of 
 
 
 def clip_gait_phase(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(phase_F radians, valid_F bool) of a clip's frames: `gait_phase` of its rows."""
+    return gait_phase(clip.root_Fx3, clip.pose_FxR, layout, toes, clip.fps)
+
+
+def gait_phase(root_Fx3, pose_FxR, layout: RowLayout, toes: tuple[int, int], fps: float
+               ) -> tuple[np.ndarray, np.ndarray]:
     """(phase_F radians, valid_F bool): the gait phase of every frame, measured without annotation:
     the unwrapped angle of the analytic signal (Hilbert transform) of left − right toe height,
     detrended and smoothed. It rises 2π per gait cycle and is 0 where the left toe is highest above
     the right. Frames where the steps fade (standing, a start or a stop) are not `valid`: their
     angle is noise."""
-    h = clip_toe_heights(clip, layout, toes)
+    h = gait.toe_heights(np.asarray(from_rows(root_Fx3, pose_FxR, layout))[:, list(toes)])
     d = h[:, 0] - h[:, 1]
-    d = d - uniform_filter1d(d, max(int(round(PHASE_DETREND_S * clip.fps)), 1), mode="nearest")
-    d = gaussian_filter1d(d, PHASE_SMOOTHING_S * clip.fps, mode="nearest")
+    d = d - uniform_filter1d(d, max(int(round(PHASE_DETREND_S * fps)), 1), mode="nearest")
+    d = gaussian_filter1d(d, PHASE_SMOOTHING_S * fps, mode="nearest")
     analytic = hilbert(d)
     amplitude = np.abs(analytic)
     valid = amplitude > PHASE_MIN_AMPLITUDE * max(float(np.median(amplitude)), 1e-9)

@@ -62,18 +62,18 @@ def style_codes(model, labels_B, z_BxZ=None) -> jax.Array:
 
 
 @jax.jit
-def g_apply(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None):
+def g_apply(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None, phase_BxT=None):
     """(root_vel_BxTx3, pose_BxTxR) of G for style codes w along curve velocities (metres per
-    sample). A G with a gait clock starts at `phase_offset_B` (radians; None: 0)."""
-    return generator(model)(curve_vel_BxTx3, w_BxD, phase_offset_B)
+    sample). A G with a gait clock starts at `phase_offset_B` (radians; None: 0), or walks at the
+    given phase `phase_BxT` (radians: e.g. a real motion's measured phase) instead of its clock."""
+    return generator(model)(curve_vel_BxTx3, w_BxD, phase_offset_B, phase_BxT)
 
 
-def apply_code(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None):
+def apply_code(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None, phase_BxT=None):
     """`g_apply` on G's part of the model, inputs through numpy (arrays from any computation
     share one compiled program per shape)."""
-    phase = None if phase_offset_B is None else np.asarray(phase_offset_B, np.float32)
-    return g_apply(generator_state(model), np.asarray(curve_vel_BxTx3, np.float32), np.asarray(w_BxD, np.float32),
-                   phase)
+    f32 = lambda a: None if a is None else np.asarray(a, np.float32)  # noqa: E731
+    return g_apply(generator_state(model), f32(curve_vel_BxTx3), f32(w_BxD), f32(phase_offset_B), f32(phase_BxT))
 
 
 @jax.jit
