@@ -21,7 +21,6 @@ from motiongan_jax.analysis import clips, style_space
 from motiongan_jax.analysis import probe as probe_lib
 from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.data import curves
-from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.train import pretrained
 
 
@@ -32,12 +31,8 @@ class Search:
 
     clip: str
     curve: str
-    steps: int
-    lr: float  # peak Adam rate, in units of the codes' spread
-    keep: int  # starts optimised
-    random: int  # random starts besides the centroids
-    windows: int  # at most this many windows of the clip
-    T: int | None  # samples per window (None: the model's T)
+    steps: int = search_lib.STEPS
+    keep: int = search_lib.KEEP  # the best screened styles each start a search
 
 
 def _check_writable(out: Path) -> None:
@@ -77,7 +72,7 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
     names = list(meta["style_names"])
     C = len(names)
     key = jax.random.key(seed)
-    k_codes, k_search = jax.random.split(key)
+    k_codes = jax.random.split(key)[0]  # (the second half of the split once seeded a search's random starts)
     codes = style_space.label_codes(state, names, k, k_codes)
     X, labels = codes.flat_samples
     p = style_space.pca(X)
@@ -117,16 +112,16 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
     marks = {}
     if search is not None:
         log(f"style search: {search.clip}")
-        target = clips.motion_windows(search.clip, meta, cfg, layout, max_windows=search.windows, T=search.T)
-        found = search_lib.search_motion(state, codes, target, num_random=search.random, keep=search.keep,
-                                steps=search.steps, lr=search.lr, key=k_search)
-        res = found["result"]
-        marks[f"search: {Path(search.clip).stem}"] = tuple(two(style_space.pca_transform(p, res.w_D[None]))[0])
-        rv, pose = search_lib.reconstruct(state, target, res.w_D)
+        root, pose, fps = clips.load_motion(search.clip, meta, cfg, layout)
+        target = clips.model_rate_windows(root, pose, fps, meta, cfg, layout, spread=search_lib.WINDOWS, phase=True,
+                                          source=str(search.clip))
+        found = search_lib.search_style(state, codes.zero_CxD, names, target, keep=search.keep, steps=search.steps)
+        marks[f"search: {Path(search.clip).stem}"] = tuple(two(style_space.pca_transform(p, found.w_D[None]))[0])
+        rv, pose = search_lib.reconstruct(state, target, found.w_D)
         spacing = target.spacing_m
         height = float(np.mean(np.asarray(target.root_NxTx3[:, :, 1])))
         curve_pts = _search_curve(search.curve, spacing, cfg.data.window_T)
-        walk = search_lib.generate_along(state, layout, res.w_D, curve_pts, spacing_m=spacing, start_height_m=height)
+        walk = search_lib.generate_along(state, layout, found.w_D, curve_pts, spacing_m=spacing, start_height_m=height)
         sample_rate = float(meta["fps"]) / cfg.data.frame_step
         stem = Path(search.clip).stem
         true_style = stem.split("_", 1)[0] if stem.split("_", 1)[0] in names else None
@@ -134,31 +129,27 @@ def write_analysis(out, *, workdir=None, model=None, step: int | None = None, pa
             "source": str(search.clip), "windows": int(target.root_NxTx3.shape[0]),
             "window_T": int(target.root_NxTx3.shape[1]), "frame_step": target.frame_step,
             "start_frames": target.start_frames, "speed_m_per_sample": spacing,
-            "loss": f"0.01 MSE(root velocity) + MSE(pose rows), lengths in CMU units ({LENGTH_UNIT_M} m)",
-            "steps": search.steps, "lr": search.lr,
-            "screen_loss": found["screen"],
-            "starts": [{"start": n, "initial_loss": float(a), "final_loss": float(b)}
-                       for n, a, b in zip(res.start_names, res.initial_loss_S, res.final_loss_S)],
-            "best_start": res.start_names[res.best_start], "final_loss": res.loss, "w": res.w_D,
-            "nearest": found["nearest"], "nearest_in_spread_units": found["nearest_scaled"],
-            "file_name_style": true_style,
-            "loss_history_best": res.history_HxS[:, res.best_start], "history_every": res.record_every,
+            "loss": found.loss_kind, "steps": search.steps, "keep": search.keep,
+            "screen_loss": {n: float(v) for n, v in zip(names, found.screen_C)},
+            "starts": [{"start": n, "final_loss": float(b)} for n, b in zip(found.starts, found.final_loss_K)],
+            "final_loss": found.loss, "style": found.mix_text(), "mix": found.mix(), "w": found.w_D,
+            "nearest": found.nearest[:3], "file_name_style": true_style, "seconds": found.seconds,
+            "loss_history_best": found.history_KxS[int(np.argmin(found.final_loss_K))],
             "walk": {"curve": search.curve, "samples": int(walk["root_Tx3"].shape[0]),
                      "start_height_m": height},
         }
         if true_style is not None:
-            order = [n for n, _ in search_lib.nearest_to(res.w_D, codes, k=C)]
-            found_report["file_name_style_rank"] = order.index(true_style) + 1
+            found_report["file_name_style_rank"] = [n for n, _ in found.nearest].index(true_style) + 1
         atomic.write_json(out / "search.json", found_report)
         with atomic.atomic_path(out / "search.npz") as tmp, open(tmp, "wb") as fh:
-            np.savez(fh, w=res.w_D, positions=walk["positions_TxJx3"], root=walk["root_Tx3"],
-                     pose=walk["pose_TxR"], curve=walk["curve_Tx3"], joint_names=np.array(layout.joint_names),
-                     parents=np.array(layout.parents, np.int32), fps=np.float64(sample_rate),
-                     target_root=np.asarray(target.root_NxTx3), target_pose=np.asarray(target.pose_NxTxR),
-                     target_curve=np.asarray(target.curve_NxTx3), recon_root_vel=np.asarray(rv),
-                     recon_pose=np.asarray(pose))
-        report["search"] = {"file": "search.json", "best_start": found_report["best_start"],
-                            "final_loss": res.loss, "nearest": found["nearest"]}
+            np.savez(fh, w=found.w_D, mix_weights=found.weights_C, positions=walk["positions_TxJx3"],
+                     root=walk["root_Tx3"], pose=walk["pose_TxR"], curve=walk["curve_Tx3"],
+                     joint_names=np.array(layout.joint_names), parents=np.array(layout.parents, np.int32),
+                     fps=np.float64(sample_rate), target_root=np.asarray(target.root_NxTx3),
+                     target_pose=np.asarray(target.pose_NxTxR), target_curve=np.asarray(target.curve_NxTx3),
+                     recon_root_vel=np.asarray(rv), recon_pose=np.asarray(pose))
+        report["search"] = {"file": "search.json", "style": found.mix_text(), "final_loss": found.loss,
+                            "nearest": found.nearest[:3]}
 
     viz.plot_style_pca(two(pts), np.asarray(labels), names, out / "pca.png",
                        centroids_Cx2=two(style_space.pca_transform(p, codes.centroids_CxD)),

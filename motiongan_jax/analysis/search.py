@@ -1,19 +1,31 @@
-"""Style search. Recover a code for an unlabelled motion: cut it into the model's windows
-(analysis.clips), then minimise a reconstruction loss through G over w alone with optax Adam (linear
-warm-up that starts below the peak rate, then cosine decay), from several starts at once, in
-one jitted scan. Unlike the reference there is no D in the loop (its terms were detached there
-and had no effect), motion and curve cover the same frames, and nothing touches the model's
-state: the parameters enter the jitted function as inputs and are never written. One code is
-fitted to all windows together (the reference fitted each window separately).
+"""Style search: the style of a motion as a mix of the model's known styles (DESIGN.md §5.3).
 
-Windows of 64+ samples (`T=`, `--search-T`) give the search a smooth loss; shorter ones a rough
-one (docs/RESULTS.md §11).
+The motion is cut into WINDOWS windows of the model's T spread over it (analysis.clips), each
+with its noise-free curve and its measured gait phase. Every known style's code w_c = LT(c, z = 0)
+is first scored as it is (the screen); the KEEP best start a search over mixes
+w = Σ_c a_c w_c, a = softmax(logits), by Adam on the logits in one jitted scan, all starts at once.
+The mix is what the style language writes as "A:0.6,B:0.3,..." (generate.styles), so a found
+style walks anywhere, from the command line or the page. Nothing touches the model's state.
+
+The loss (LOSSES, measured in docs/RESULTS.md §22) adds up parts (PARTS), each in units of its
+value at the best known style as it is (so that a loss under 1 fits better than every known style):
+- "clock": G walks each window on its own clock (phase offset 0) and is compared sample for sample
+  (0.01 MSE of root velocity + MSE of pose rows, the reference's reconstruction);
+- "phase": the same comparison with G walking each window at the window's measured gait phase
+  (`G(curve, w, phase_BxT=...)`, as the training's reconstruction term does), over the samples
+  where the phase is measured, so that a walker out of step with the clip is not punished for it;
+- "stats": phase-free statistics of each window in its walker's frame, G on its own clock (the
+  mean and spread of every pose row, the speed of every row, the spread of the vertical root
+  speed): what G's own gait looks like in that style, cadence included;
+- "phase_stats": "phase" + "stats", the default for a G with a gait clock (LOSS); a G without
+  one (the paper's) has no phase to walk at and gets "stats" (NO_CLOCK_LOSS).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import time
 from typing import Sequence
 
 import chex
@@ -23,12 +35,24 @@ import numpy as np
 import optax
 
 from motiongan_jax.analysis.clips import MotionWindows
-from motiongan_jax.analysis.style_space import AnalysisError, StyleCodes
+from motiongan_jax.analysis.style_space import AnalysisError
 from motiongan_jax.data import curves
 from motiongan_jax.generate import walk
 from motiongan_jax.model import apply as model_apply
 from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M, RowLayout
+
+# the loss's parts (module doc): each loss, the parts it adds up
+PARTS = {"clock": ("clock",), "phase": ("phase",), "stats": ("stats",), "phase_stats": ("phase", "stats")}
+LOSSES = tuple(PARTS)
+LOSS = "phase"  # for a G with a gait clock (search_loss)
+NO_CLOCK_LOSS = "stats"  # for one without (the paper's G): it has no phase to walk at
+WINDOWS = 4  # windows of the model's T per motion, spread over it
+KEEP = 2  # the best styles of the screen each start a search
+STEPS = 30
+LR = 0.2  # Adam's peak rate on the mix's logits
+VEL_WEIGHT = 0.01  # the reference's weight of root velocity against pose rows
+START_WEIGHT = 0.9  # a start's mix: this much of its style, the rest shared by the others
 
 
 def search_schedule(peak_lr: float, steps: int, warmup: int):
@@ -45,171 +69,189 @@ def search_schedule(peak_lr: float, steps: int, warmup: int):
     return schedule
 
 
-def _window_losses(root_vel_NxTx3, pose_NxTxR, u_NxTx3, target_pose_NxTxR, vel_weight, length_unit):
-    lv = jnp.mean(jnp.square(root_vel_NxTx3[:, 1:] - u_NxTx3[:, 1:]), axis=(1, 2))
-    lp = jnp.mean(jnp.square(pose_NxTxR - target_pose_NxTxR), axis=(1, 2))
-    return (vel_weight * lv + lp) / length_unit**2
+def window_stats(root_vel_BxTx3, pose_BxTxR, length_unit: float = LENGTH_UNIT_M):
+    """B x (3R + 1) phase-free statistics of each window in its walker's frame
+    (`trajectory.window_frame`), in `length_unit`s: every pose row's mean and standard deviation
+    over time, its speed (root mean square per sample, ×4), and the standard deviation of the
+    vertical root velocity (×4)."""
+    rv, pose = trajectory.window_frame(root_vel_BxTx3, pose_BxTxR)
+    sd = lambda x, axis: jnp.sqrt(jnp.var(x, axis) + 1e-12)  # noqa: E731  (finite gradient at 0)
+    speed = jnp.sqrt(jnp.mean(jnp.square(jnp.diff(pose, axis=1)), 1) + 1e-12)
+    return jnp.concatenate([jnp.mean(pose, 1), sd(pose, 1), 4 * speed, 4 * sd(rv[:, 1:, 1], 1)[:, None]],
+                           -1) / length_unit
 
 
-def reconstruction_loss(root_vel_NxTx3, pose_NxTxR, target: MotionWindows, *, vel_weight: float = 0.01,
-                        length_unit: float = LENGTH_UNIT_M):
-    """vel_weight · MSE(v̂, u) + MSE(P̂, P) per window, lengths in `length_unit` (the losses' CMU
-    unit), as in the reference's search. v[0] is left out: it is a reflected duplicate, not a
-    step (trajectory.velocity)."""
-    return _window_losses(root_vel_NxTx3, pose_NxTxR, trajectory.velocity(target.root_NxTx3),
-                          target.pose_NxTxR, vel_weight, length_unit)
+def window_losses(part: str, root_vel_BxTx3, pose_BxTxR, target_vel_BxTx3, target_pose_BxTxR, valid_BxT,
+                  length_unit: float = LENGTH_UNIT_M):
+    """One part of the search's loss for each of B windows (PARTS): "stats" compares
+    `window_stats`; "clock" and "phase" compare sample for sample (VEL_WEIGHT · MSE of root
+    velocity + MSE of pose rows, in `length_unit`s) over the samples `valid_BxT` marks. v[0] is left
+    out: it is a reflected duplicate, not a step (trajectory.velocity)."""
+    if part == "stats":
+        d = window_stats(root_vel_BxTx3, pose_BxTxR, length_unit) - window_stats(
+            target_vel_BxTx3, target_pose_BxTxR, length_unit)
+        return jnp.mean(jnp.square(d), -1)
+    per_t = (VEL_WEIGHT * jnp.mean(jnp.square(root_vel_BxTx3 - target_vel_BxTx3), -1)
+             + jnp.mean(jnp.square(pose_BxTxR - target_pose_BxTxR), -1)) / length_unit**2
+    use = valid_BxT.at[:, 0].set(False).astype(per_t.dtype)
+    return jnp.sum(use * per_t, 1) / jnp.maximum(jnp.sum(use, 1), 1.0)
 
 
-@functools.partial(jax.jit, static_argnames=("steps", "warmup", "record_every"))
-def _search_scan(gstate, vel_NxTx3, u_NxTx3, pose_NxTxR, u0_SxD, center_D, scale_D, lr, vel_weight,
-                 length_unit, *, steps: int, warmup: int, record_every: int):
-    S, N = u0_SxD.shape[0], vel_NxTx3.shape[0]
-    tx = optax.adam(search_schedule(lr, steps, warmup), b1=0.5, b2=0.999)
-    vel, u, pose_t = (jnp.tile(a, (S, 1, 1)) for a in (vel_NxTx3, u_NxTx3, pose_NxTxR))
+@functools.partial(jax.jit, static_argnames=("loss", "keep", "steps"))
+def _search(g, codes_CxD, vel_NxTx3, tv_NxTx3, tp_NxTxR, phase_NxT, valid_NxT, lr, *, loss: str, keep: int,
+            steps: int):
+    C, N = codes_CxD.shape[0], vel_NxTx3.shape[0]
+    parts = PARTS[loss]
 
-    def losses_S(p_SxD):
-        w = center_D + scale_D * p_SxD
-        rv, pose = model_apply.g_apply(gstate, vel, jnp.repeat(w, N, axis=0))
-        return jnp.mean(_window_losses(rv, pose, u, pose_t, vel_weight, length_unit).reshape(S, N), axis=1)
+    def tile(a, k):
+        return jnp.tile(a, (k,) + (1,) * (a.ndim - 1))
 
-    def total(p):
-        l_S = losses_S(p)
-        # The starts are independent: the sum's gradient wrt row s is start s's own gradient, and
-        # Adam is elementwise, so this equals S separate optimisations.
-        return jnp.sum(l_S), l_S
+    def components(w_KxD):
+        """K x P: each part of the loss of each code, averaged over the windows."""
+        k = w_KxD.shape[0]
+        vel, w = tile(vel_NxTx3, k), jnp.repeat(w_KxD, N, axis=0)
+        own = "clock" in parts or "stats" in parts  # G on its own clock
+        if "phase" not in parts:
+            walks = {"clock": model_apply.g_apply(g, vel, w)}
+        else:  # G at the windows' measured phase, and on its own clock in the same call (one batch)
+            phase = tile(phase_NxT, k)
+            if own:
+                phase = jnp.concatenate([phase, model_apply.generator(g).walked_phase(vel, w)])
+                vel, w = jnp.concatenate([vel, vel]), jnp.concatenate([w, w])
+            rv, pose = model_apply.g_apply(g, vel, w, None, phase)
+            walks = {"phase": (rv[: k * N], pose[: k * N]), "clock": (rv[k * N:], pose[k * N:])}
+        vel = vel[: k * N]
+        out = []
+        for part in parts:
+            rv, pose = walks["phase" if part == "phase" else "clock"]
+            valid = tile(valid_NxT, k) if part == "phase" else jnp.ones((k * N, vel.shape[1]), bool)
+            out.append(jnp.mean(window_losses(part, rv, pose, tile(tv_NxTx3, k), tile(tp_NxTxR, k),
+                                              valid).reshape(k, N), 1))
+        return jnp.stack(out, -1)
+
+    # each part in units of its value at the best known style as it is, so that parts of other
+    # units add up, and a loss under 1 fits better than every known style
+    screen_CxP = components(codes_CxD)
+    scale_P = jnp.maximum(jnp.min(screen_CxP, 0), 1e-8 * jnp.max(screen_CxP, 0) + 1e-30)
+    screen_C = jnp.sum(screen_CxP / scale_P, -1)
+    _, top_K = jax.lax.top_k(-screen_C, keep)
+    rest = (1.0 - START_WEIGHT) / max(C - 1, 1)
+    logits0 = jnp.log(jnp.where(jnp.arange(C)[None] == top_K[:, None], START_WEIGHT, rest))
+
+    def losses(logits_KxC):
+        return jnp.sum(components(jax.nn.softmax(logits_KxC, -1) @ codes_CxD) / scale_P, -1)
+
+    tx = optax.adam(search_schedule(lr, steps, max(steps // 10, 1)), b1=0.5, b2=0.999)
 
     def body(carry, _):
-        p, opt = carry
-        (_, l_S), grad = jax.value_and_grad(total, has_aux=True)(p)
-        updates, opt = tx.update(grad, opt, p)
-        return (optax.apply_updates(p, updates), opt), l_S
+        logits, opt = carry
+        (_, l_K), grad = jax.value_and_grad(lambda x: (jnp.sum(losses(x)), losses(x)), has_aux=True)(logits)
+        # the starts are independent: the sum's gradient wrt row k is start k's own, Adam is elementwise
+        updates, opt = tx.update(grad, opt, logits)
+        return (optax.apply_updates(logits, updates), opt), (l_K, logits)
 
-    (p, _), hist = jax.lax.scan(body, (u0_SxD, tx.init(u0_SxD)), None, length=steps)
-    return center_D + scale_D * p, losses_S(p), hist[::record_every]
+    # every step's loss and the mix it was computed at: each start keeps its best step (no G call
+    # after the scan, so the program compiles G's forward and backward once each)
+    _, (history_SxK, logits_SxKxC) = jax.lax.scan(body, (logits0, tx.init(logits0)), None, length=steps)
+    best_K = jnp.argmin(history_SxK, axis=0)
+    logits_KxC = jnp.take_along_axis(logits_SxKxC, best_K[None, :, None], axis=0)[0]
+    return screen_C, top_K, jax.nn.softmax(logits_KxC, -1), jnp.min(history_SxK, axis=0), history_SxK
 
 
 @dataclasses.dataclass(frozen=True)
-class SearchResult:
-    w_D: np.ndarray  # the best start's code
-    loss: float  # its final reconstruction loss
-    best_start: int
-    start_names: tuple[str, ...]
-    w_SxD: np.ndarray  # every start's final code
-    initial_loss_S: np.ndarray
-    final_loss_S: np.ndarray
-    history_HxS: np.ndarray  # loss before update 0, record_every, 2·record_every, ...
-    record_every: int
+class StyleFound:
+    """A motion's style as a mix of the known styles."""
+    style_names: tuple[str, ...]
+    loss_kind: str  # the search's loss (LOSSES)
+    weights_C: np.ndarray  # the mix (sums to 1)
+    w_D: np.ndarray  # its code, Σ weights_C · codes_CxD
+    loss: float  # its search loss (the lowest of any step of any start)
+    screen_C: np.ndarray  # every known style's loss as it is
+    nearest: list  # [[name, distance], ...]: the known styles' codes nearest to w, nearest first
+    starts: tuple[str, ...]  # the styles the searches started from, best screened first
+    final_loss_K: np.ndarray  # each start's lowest loss
+    history_KxS: np.ndarray  # each start's loss before every update
+    seconds: float  # the search's wall-clock time (compiling included when it compiled)
+
+    def mix(self, at_least: float = 0.005, digits: int = 3) -> list[list]:
+        """[[name, weight], ...] by decreasing weight, the weights of at least `at_least`, rounded
+        to `digits` decimals and renormalised: the style as the style language writes a mix."""
+        order = [int(i) for i in np.argsort(-self.weights_C, kind="stable") if self.weights_C[i] >= at_least]
+        total = float(np.sum(self.weights_C[order]))
+        return [[self.style_names[i], round(float(self.weights_C[i]) / total, digits)] for i in order]
+
+    def mix_text(self) -> str:
+        """The found style for --style and the page: "A:0.62,B:0.31,C:0.07"."""
+        return ",".join(f"{n}:{a:g}" for n, a in self.mix())
 
 
-def code_scale(codes: StyleCodes) -> tuple[jax.Array, jax.Array]:
-    """(centre, per-dimension spread) of the labelled codes: the search's coordinates."""
-    X, _ = codes.flat_samples
-    sd = jnp.std(X, axis=0)
-    floor = jnp.maximum(jnp.max(sd) * 1e-3, 1e-12)
-    return jnp.mean(X, axis=0), jnp.where(sd > floor, sd, floor)
-
-
-def search_starts(codes: StyleCodes, num_random: int = 4, key: jax.Array | None = None
-                  ) -> tuple[jax.Array, tuple[str, ...]]:
-    """Every style centroid, plus num_random draws N(centre, spread²) of `code_scale` (from `key`,
-    default key 1). Returns (starts S x D, their names)."""
-    names = [f"centroid:{s}" for s in codes.style_names]
-    starts = [codes.centroids_CxD]
-    if num_random > 0:
-        centre, spread = code_scale(codes)
-        eps = jax.random.normal(jax.random.key(1) if key is None else key, (num_random, centre.shape[0]))
-        starts.append(centre + eps * spread)
-        names += [f"random:{i}" for i in range(num_random)]
-    return jnp.concatenate(starts, axis=0).astype(jnp.float32), tuple(names)
-
-
-def style_search(state, target: MotionWindows, starts_SxD, start_names: Sequence[str] | None = None, *,
-                 center_D=None, scale_D=None, steps: int = 200, lr: float = 0.1, warmup: int = 20,
-                 vel_weight: float = 0.01, length_unit: float = LENGTH_UNIT_M,
-                 record_every: int = 10) -> SearchResult:
-    """Fit one code w to all of the target's windows, from every start at once (one jitted scan).
-
-    Adam (β 0.5, 0.999, as in the reference) runs on p with w = center + scale · p, so `lr` is in
-    units of `scale` per step whatever the size of the codes (pass `code_scale(codes)`; default 0
-    and 1: plain w). Loss: `reconstruction_loss`, averaged over windows. The state is read, never
-    written; D is not involved.
-    """
-    w0 = jnp.asarray(starts_SxD, jnp.float32)
-    chex.assert_rank(w0, 2)
-    S, D = w0.shape
-    names = tuple(start_names) if start_names is not None else tuple(f"start:{i}" for i in range(S))
-    if len(names) != S:
-        raise ValueError(f"{S} starts but {len(names)} names")
+def search_style(model, codes_CxD, style_names: Sequence[str], target: MotionWindows, *, loss: str | None = None,
+                 keep: int = KEEP, steps: int = STEPS, lr: float = LR,
+                 length_unit: float = LENGTH_UNIT_M) -> StyleFound:
+    """The style of `target` (windows with their measured gait phase: `clips.windows_from_rows` with
+    a layout and fps) as a mix of `codes_CxD` (the known styles' codes, z = 0:
+    `style_space.label_codes(...).zero_CxD`). See the module's doc; `loss` defaults to
+    `search_loss(model)`."""
+    if loss is None:
+        loss = search_loss(model)
+    if loss not in LOSSES:
+        raise ValueError(f"loss must be one of {LOSSES}, got {loss!r}")
+    codes = np.asarray(codes_CxD, np.float32)
+    chex.assert_rank(codes, 2)
+    C = codes.shape[0]
+    if len(style_names) != C:
+        raise ValueError(f"{C} codes but {len(style_names)} style names")
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
-    center = jnp.zeros((D,), jnp.float32) if center_D is None else jnp.asarray(center_D, jnp.float32)
-    scale = jnp.ones((D,), jnp.float32) if scale_D is None else jnp.asarray(scale_D, jnp.float32)
-    chex.assert_shape([center, scale], (D,))
-    # numpy in: one jit cache entry whatever device computation made the inputs
-    host = lambda x: np.asarray(x, np.float32)  # noqa: E731
-    w, final, hist = _search_scan(model_apply.generator_state(state), host(trajectory.velocity(target.curve_NxTx3)),
-                                  host(trajectory.velocity(target.root_NxTx3)), host(target.pose_NxTxR),
-                                  host((w0 - center) / scale), host(center), host(scale), host(lr),
-                                  host(vel_weight), host(length_unit), steps=int(steps),
-                                  warmup=int(warmup), record_every=int(record_every))
-    final, hist, w = np.asarray(final), np.asarray(hist), np.array(w)
+    if target.phase_NxT is None:
+        raise ValueError("the target has no gait phase: cut it with a layout and fps (clips.windows_from_rows)")
+    valid = np.asarray(target.phase_valid_NxT, bool)
+    if "phase" in PARTS[loss] and not model_apply.has_gait_phase(model):
+        raise ValueError(f"loss {loss!r} walks G at a measured phase, but this G has no gait clock")
+    if "phase" in PARTS[loss] and valid[:, 1:].sum() == 0:
+        raise AnalysisError(f"{target.source or 'the motion'}: no steps found (its toes do not alternate), "
+                            "so it has no walking style to recover")
+    keep = max(1, min(int(keep), C))
+    host = lambda x: np.asarray(x, np.float32)  # noqa: E731  (numpy in: one compiled program per shape)
+    t0 = time.perf_counter()
+    screen, top, weights, final, history = _search(
+        model_apply.generator_state(model), codes, host(trajectory.velocity(target.curve_NxTx3)),
+        host(trajectory.velocity(target.root_NxTx3)), host(target.pose_NxTxR), host(target.phase_NxT), valid,
+        host(lr), loss=loss, keep=keep, steps=int(steps))
+    final = np.asarray(final)
+    seconds = time.perf_counter() - t0
     if not np.isfinite(final).any():
-        raise AnalysisError(f"style search diverged from every start (final losses {final}); lower lr")
-    # a start that Adam left worse than it found it keeps its code as it was: never worse than the start
-    worse = ~(final <= hist[0])
-    w[worse], final = np.asarray(w0, np.float32)[worse], np.where(worse, hist[0], final)
+        raise AnalysisError(f"style search diverged from every start (final losses {final})")
     best = int(np.nanargmin(final))
-    return SearchResult(w[best], float(final[best]), best, names, w, hist[0], final, hist, int(record_every))
+    a = np.asarray(weights, np.float64)[best]
+    w = (a @ codes.astype(np.float64)).astype(np.float32)
+    return StyleFound(tuple(style_names), loss, a, w, float(final[best]), np.asarray(screen),
+                      nearest_to(w, codes, style_names, k=C), tuple(style_names[int(i)] for i in np.asarray(top)),
+                      final, np.asarray(history).T, seconds)
 
 
-def start_losses(state, target: MotionWindows, w_SxD, *, vel_weight: float = 0.01,
-                 length_unit: float = LENGTH_UNIT_M) -> np.ndarray:
-    """The reconstruction loss of each code as it is (G forward only, one start at a time, with
-    the same compiled forward as `reconstruct`)."""
-    return np.array([float(jnp.mean(reconstruction_loss(*reconstruct(state, target, w), target,
-                                                         vel_weight=vel_weight, length_unit=length_unit)))
-                     for w in jnp.asarray(w_SxD, jnp.float32)])
+def search_loss(model) -> str:
+    """The search's loss for this model: LOSS when its G keeps a gait clock, else NO_CLOCK_LOSS."""
+    return LOSS if model_apply.has_gait_phase(model) else NO_CLOCK_LOSS
 
 
-def search_motion(state, codes: StyleCodes, target: MotionWindows, *, num_random: int = 4,
-                  keep: int | None = 4, steps: int = 200, lr: float = 0.1, warmup: int = 20,
-                  vel_weight: float = 0.01, length_unit: float = LENGTH_UNIT_M, nearest: int = 3,
-                  key: jax.Array | None = None) -> dict:
-    """Style search as the CLI runs it: starts = every centroid + `num_random` draws
-    (`search_starts`); the `keep` with the lowest loss as they are are optimised (None: all) in
-    the codes' own coordinates (`code_scale`); the best result's nearest labelled styles.
-
-    Returns {"result": SearchResult, "screen": {start name: loss as is}, "nearest": [[name,
-    distance], ...], "nearest_scaled": the same distances in units of the codes' spread}.
-    """
-    starts, names = search_starts(codes, num_random, key)
-    screen = start_losses(state, target, starts, vel_weight=vel_weight, length_unit=length_unit)
-    order = np.argsort(screen, kind="stable")
-    if keep is not None:
-        order = order[: max(1, int(keep))]
-    centre, spread = code_scale(codes)
-    res = style_search(state, target, starts[order], [names[i] for i in order], center_D=centre,
-                       scale_D=spread, steps=steps, lr=lr, warmup=warmup, vel_weight=vel_weight,
-                       length_unit=length_unit)
-    near = nearest_to(res.w_D, codes, k=nearest)
-    scale = float(jnp.sqrt(jnp.mean(jnp.square(spread))))
-    return {"result": res, "screen": {n: float(v) for n, v in zip(names, screen)}, "nearest": near,
-            "nearest_scaled": [[n, d / scale] for n, d in near]}
-
-
-def nearest_to(w_D, codes: StyleCodes, k: int = 3) -> list[list]:
-    """The k labelled styles whose centroids are nearest to w: [[name, distance], ...]."""
-    d = np.asarray(jnp.linalg.norm(codes.centroids_CxD - jnp.asarray(w_D)[None], axis=-1))
+def nearest_to(w_D, codes_CxD, style_names: Sequence[str], k: int = 3) -> list[list]:
+    """The k known styles whose codes are nearest to w: [[name, distance], ...]."""
+    d = np.linalg.norm(np.asarray(codes_CxD, np.float64) - np.asarray(w_D, np.float64)[None], axis=-1)
     order = np.argsort(d, kind="stable")[:k]
-    return [[codes.style_names[i], float(d[i])] for i in order]
+    return [[style_names[i], float(d[i])] for i in order]
 
 
-def reconstruct(state, target: MotionWindows, w_D):
-    """G's (root_vel, pose) for every window of the target with one code w."""
+def reconstruct(model, target: MotionWindows, w_D, loss: str | None = None):
+    """G's (root_vel, pose) for every window of the target with one code w, walked at the windows'
+    measured phase when the search's loss does so (PARTS), else on G's own clock."""
+    loss = search_loss(model) if loss is None else loss
     N = target.curve_NxTx3.shape[0]
-    # numpy in: the same jit cache entry whether w comes from numpy or from a device computation
     w = np.broadcast_to(np.asarray(w_D, np.float32), (N, np.shape(w_D)[-1]))
-    return model_apply.apply_code(state, trajectory.velocity(target.curve_NxTx3), w)
+    vel = trajectory.velocity(target.curve_NxTx3)
+    if "phase" in PARTS[loss]:
+        return model_apply.apply_code(model, vel, w, phase_BxT=target.phase_NxT)
+    return model_apply.apply_code(model, vel, w)
 
 
 def generate_along(state, layout: RowLayout, w_D, curve_xz_Px2, *, spacing_m: float,

@@ -2,8 +2,7 @@
 
   python bin/analyze.py [--workdir DIR | --model FILE.npz] --out OUTDIR [--k 10] [--seed 0] [--step N]
                         [--search CLIP.bvh|CLIP.npz [--search-curve SHAPE|CURVE.csv|.json]
-                         [--search-steps 200] [--search-keep 4] [--search-random 4]
-                         [--search-windows 4] [--search-T T] [--search-lr 0.1]]
+                         [--search-steps N] [--search-keep K]]
 
 Writes into OUTDIR:
   pca.png       2-D PCA of the style codes w (K per style from z ~ N(0, I); crosses: z = 0),
@@ -14,8 +13,9 @@ Writes into OUTDIR:
                 nearest styles, and, for a model of the embedded dataset, the cross-validated R²
                 of linear probes from w to the known gait parameters
 With --search (a BVH clip, or an .npz of world positions in metres with the model's joints):
-  search.json   per start: loss as is / after the search; the best code, its loss, its nearest
-                styles; the clip's windows, frame step and speed
+  search.json   the clip's style as a mix of the known styles (analysis/search.py: each style's
+                loss as it is, the searches from the best, the mix found, its loss, its nearest
+                styles); the clip's windows, frame step and speed
   search.npz    the recovered w, and a walk with it along --search-curve (default s_curve) at the
                 clip's speed: positions (T, J, 3) metres, root, pose rows, curve, joint_names,
                 parents, fps; plus the model's reconstruction of the clip's windows
@@ -38,19 +38,15 @@ def main(argv=None) -> int:
     ap.add_argument("--search", default=None, metavar="CLIP", help="a .bvh clip or an .npz of world positions")
     ap.add_argument("--search-curve", default="s_curve",
                     help="walk the recovered style along this shape or .csv/.json curve file")
-    ap.add_argument("--search-steps", type=int, default=200)
-    ap.add_argument("--search-lr", type=float, default=0.1, help="peak Adam rate, in units of the codes' spread")
-    ap.add_argument("--search-keep", type=int, default=4, help="starts optimised (the best as they are)")
-    ap.add_argument("--search-random", type=int, default=4, help="random starts besides the centroids")
-    ap.add_argument("--search-windows", type=int, default=4, help="at most this many windows of the clip")
-    ap.add_argument("--search-T", type=int, default=None,
-                    help="samples per window (a multiple of 8; default the model's T). Longer windows "
-                         "give G's instance norms more samples and a smoother loss over w")
+    ap.add_argument("--search-steps", type=int, default=None, help="Adam steps of each search (default: the search's)")
+    ap.add_argument("--search-keep", type=int, default=None,
+                    help="the best screened styles each start a search (default: the search's)")
     args = ap.parse_args(argv)
     if args.k < 2:
         ap.error("--k must be >= 2")
-    if args.search_steps < 1 or args.search_keep < 1 or args.search_windows < 1 or args.search_random < 0:
-        ap.error("--search-steps, --search-keep and --search-windows must be >= 1, --search-random >= 0")
+    if (args.search_steps is not None and args.search_steps < 1) or (args.search_keep is not None
+                                                                     and args.search_keep < 1):
+        ap.error("--search-steps and --search-keep must be >= 1")
 
     from motiongan_jax.analysis.report import Search, write_analysis
     from motiongan_jax.analysis.style_space import AnalysisError
@@ -58,9 +54,8 @@ def main(argv=None) -> int:
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.train.checkpoint import CheckpointError
 
-    search = None if not args.search else Search(
-        args.search, args.search_curve, steps=args.search_steps, lr=args.search_lr, keep=args.search_keep,
-        random=args.search_random, windows=args.search_windows, T=args.search_T)
+    given = {k: v for k, v in (("steps", args.search_steps), ("keep", args.search_keep)) if v is not None}
+    search = None if not args.search else Search(args.search, args.search_curve, **given)
     try:
         report = write_analysis(args.out, workdir=args.workdir, model=args.model, step=args.step,
                                 params=args.params, k=args.k, seed=args.seed, search=search)
@@ -76,7 +71,7 @@ def main(argv=None) -> int:
               f"per sample {pw['mean_r2_cv']:.3f}")
     if "search" in report:
         s = report["search"]
-        print(f"search: best start {s['best_start']}, loss {s['final_loss']:.4g}, nearest "
+        print(f"search: style {s['style']}, loss {s['final_loss']:.4g}, nearest "
               + ", ".join(f"{n} ({d:.3g})" for n, d in s["nearest"]))
     print(f"wrote {args.out}")
     return 0
