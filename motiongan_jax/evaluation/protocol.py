@@ -19,12 +19,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from motiongan_jax.analysis import clips as clips_lib
 from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.analysis import style_space
 from motiongan_jax.config import ConfigError, config_hash
 from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
-from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics, own_paths, streaming
+from motiongan_jax.evaluation import clip_metrics, d_probe, evaluator, metrics, own_paths, streaming, style_recovery
 from motiongan_jax.evaluation.eval_curves import (
     EvalCurve,
     file_curves,
@@ -54,7 +53,7 @@ class Settings:
     long_curve_m: float = 60.0  # the drift test's straight line
     interp_steps: int = 5
     search_clips: int = 1  # per style
-    search_steps: int = 200
+    search_steps: int = search_lib.STEPS
     w_samples: int = 10
     realism_windows: int = 8  # like-for-like walks (own_paths.py): each held-out path up to this many windows
     realism_max_curves: int = 48
@@ -209,30 +208,20 @@ def _style_space_block(ctx: Context, seed: int) -> dict:
 
 
 def _search_block(ctx: Context) -> dict:
-    """Style search on held-out real clips: is the recovered w nearest its true style's centroid?"""
+    """Style search on held-out real clips (`search_clips` per style) and on G's walks of their
+    paths (style_recovery.py): is the recovered style nearest the true one?"""
     s = ctx.settings
-    if s.search_clips < 1:
+    if s.search_clips < 1 or s.search_steps < 1:
         return {}
-    T, step = ctx.cfg.data.window_T, ctx.cfg.data.frame_step
-    codes = style_space.label_codes(ctx.state, ctx.style_names, k=s.w_samples)
-    taken: dict[str, int] = {}
-    hits, losses = [], []
-    for clip in ctx.val_clips:
-        if taken.get(clip.label.style, 0) >= s.search_clips:
-            continue
-        try:
-            target = clips_lib.windows_from_rows(clip.root_Fx3, clip.pose_FxR, T=T, frame_step=step,
-                                                interval=ctx.cfg.data.control_point_interval, max_windows=2)
-        except style_space.AnalysisError:
-            continue
-        taken[clip.label.style] = taken.get(clip.label.style, 0) + 1
-        res = search_lib.search_motion(ctx.state, codes, target, steps=s.search_steps)
-        hits.append(res["nearest"][0][0] == clip.label.style)
-        losses.append(res["result"].loss)
-    if not hits:
+    res = style_recovery.recovery(ctx.state, ctx.meta, ctx.cfg, ctx.layout, ctx.val_clips, ctx.style_names,
+                                  style_recovery.Settings(steps=s.search_steps, clips_per_style=s.search_clips),
+                                  log=lambda m: None)
+    if not res["real"]["clips"]:
         return {}
-    return {"search_recovery": float(np.mean(hits)), "search_clips": len(hits),
-            "search_final_loss": float(np.mean(losses))}
+    return {"search_recovery": res["real"]["top1"], "search_recovery_top3": res["real"]["top3"],
+            "search_recovery_own_walks": res["own"]["top1"], "search_clips": res["real"]["clips"],
+            "search_final_loss": float(np.mean([r["loss"] for r in res["clips"]["real"]])),
+            "search_seconds_median": res["seconds"]["median"]}
 
 
 GEN_KEYS = ("traj_error_original_m", "traj_error_symmetric_m", "endpoint_error_m", "path_length_ratio",
@@ -446,6 +435,42 @@ def _load_matching(ev_path, style_names, layout, cfg, source) -> evaluator.Evalu
     return ev
 
 
+def _load(workdir, step, params, model):
+    """(state, meta, cfg, layout, checkpoint step, source) of a run's checkpoint or an export."""
+    if workdir is None:
+        state, meta, cfg, layout = pretrained.load_model(None, step, params, model)
+        return state, meta, cfg, layout, int(state.step), str(model or pretrained.SHIPPED_MODEL.name)
+    ckpt_step = checkpoint.resolve_step(workdir, step)
+    state, meta, cfg, layout = checkpoint.load_run(workdir, ckpt_step, params)
+    return state, meta, cfg, layout, ckpt_step, str(workdir)
+
+
+def _heldout(cfg, data_dir, style_names):
+    if data_dir is not None:
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=data_dir))
+    dataset = clip_cache.load_dataset(cfg.data)
+    if tuple(dataset.style_names) != tuple(style_names):
+        raise file_labels.DataError(f"the data's styles {list(dataset.style_names)} differ from the model's")
+    if not dataset.val:
+        raise file_labels.DataError("the validation split is empty: no held-out data to evaluate on")
+    return cfg, dataset
+
+
+def search_run(workdir, settings: style_recovery.Settings, *, step: int | None = None, params: str = "ema",
+               data_dir=None, model=None, log: Callable[[str], None] = print) -> tuple[dict, dict]:
+    """The style search alone (`bin/evaluate.py --search-only`) on the run `workdir` (or the export
+    `model`, default the shipped model) and its held-out clips: (style_recovery.recovery's result,
+    a header naming the model, config, step and files)."""
+    state, meta, cfg, layout, ckpt_step, source = _load(workdir, step, params, model)
+    cfg, dataset = _heldout(cfg, data_dir, meta["style_names"])
+    log(f"style search on {len(dataset.val)} held-out clips of {source}")
+    result = style_recovery.recovery(state, meta, cfg, layout, dataset.val, dataset.style_names, settings, log=log)
+    header = {"workdir": source, "config_name": cfg.name, "config_hash": config_hash(cfg),
+              "checkpoint_step": ckpt_step, "val_files": sorted(Path(c.source).name for c in dataset.val),
+              "data_dir": dataset.data_dir}
+    return result, header
+
+
 def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: int | None = None,
                  params: str = "ema", data_dir=None, evaluator_path=None, cmu_curves=None,
                  speed_free_evaluator_path=None, model=None,
@@ -460,18 +485,9 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
     WORKDIR/evaluator_speed_free.npz when that exists) adds its style accuracy to the realism part.
     Raises ConfigError, DataError, BVHError, CheckpointError, EvaluatorError, EvaluationError or
     GenerateError naming the problem."""
-    if workdir is None:
-        if not evaluator_path:
-            raise ConfigError("evaluating a model file needs --evaluator (there is no run to find one in)")
-        state, meta, cfg, layout = pretrained.load_model(None, step, params, model)
-        ckpt_step = int(state.step)
-        source = str(model or pretrained.SHIPPED_MODEL.name)
-    else:
-        ckpt_step = checkpoint.resolve_step(workdir, step)
-        state, meta, cfg, layout = checkpoint.load_run(workdir, ckpt_step, params)
-        source = str(workdir)
-    if data_dir is not None:
-        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, data_dir=data_dir))
+    if workdir is None and not evaluator_path:
+        raise ConfigError("evaluating a model file needs --evaluator (there is no run to find one in)")
+    state, meta, cfg, layout, ckpt_step, source = _load(workdir, step, params, model)
     ev_path = Path(evaluator_path) if evaluator_path else Path(workdir) / "evaluator.npz"
     style_names = tuple(meta["style_names"])
     ev = _load_matching(ev_path, style_names, layout, cfg, source)
@@ -483,11 +499,7 @@ def evaluate_run(workdir, settings: Settings, shapes: Sequence[str], *, step: in
         if not ev_sf.meta["config"].get("speed_free"):
             raise evaluator.EvaluatorError(f"{sf_path} is not a speed-free evaluator (bin/train_evaluator.py "
                                            "--speed-free)")
-    dataset = clip_cache.load_dataset(cfg.data)
-    if tuple(dataset.style_names) != style_names:
-        raise file_labels.DataError(f"the data's styles {list(dataset.style_names)} differ from the model's")
-    if not dataset.val:
-        raise file_labels.DataError("the validation split is empty: no held-out data to evaluate on")
+    cfg, dataset = _heldout(cfg, data_dir, style_names)
     rate = walk.sample_rate(meta, cfg)
     T = cfg.data.window_T
     L = settings.windows_per_curve * T

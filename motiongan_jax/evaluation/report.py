@@ -99,9 +99,10 @@ def markdown(report: dict) -> str:
             lines.append(f"| {kind} | {_fmt(a['mean'])} ± {_fmt(a['ci95'])} | {_fmt(b['mean'])} ± {_fmt(b['ci95'])} |")
     if r.get("search"):
         s = r["search"]
-        lines += ["", f"Style search: the recovered w's nearest centroid is the clip's true style for "
-                      f"{_fmt(s['search_recovery'])} of {s['search_clips']} held-out clips "
-                      f"(final loss {_fmt(s['search_final_loss'])})."]
+        lines += ["", f"Style search: the recovered style's nearest known style is the clip's own for "
+                      f"{_fmt(s['search_recovery'])} of {s['search_clips']} held-out clips (top-3 "
+                      f"{_fmt(s['search_recovery_top3'])}; G's walks of their paths, w known: "
+                      f"{_fmt(s['search_recovery_own_walks'])}; median search {_fmt(s['search_seconds_median'])} s)."]
     lines += ["", "## Per style", "",
               "| style | SRA gen | SRA real | FMD gen | traj. orig. (m) | skate gen | skate real | bone err gen |",
               "|---|---|---|---|---|---|---|---|"]
