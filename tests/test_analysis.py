@@ -261,7 +261,7 @@ def test_style_search_refuses_a_motion_without_steps(run):
     t = dataclasses.replace(t, phase_valid_NxT=np.zeros((1, T), bool))
     codes = np.zeros((len(meta["style_names"]), cfg.model.w_dim), np.float32)
     with pytest.raises(ValueError, match="walks G at a measured phase, but this G has no gait clock"):
-        search_lib.search_style(state, codes, meta["style_names"], t, loss="phase_stats")
+        search_lib.search_style(state, codes, meta["style_names"], t, loss="phase")
     with pytest.raises(ValueError, match="loss must be one of"):
         search_lib.search_style(state, codes, meta["style_names"], t, loss="nope")
 
@@ -286,7 +286,7 @@ def test_search_finds_the_style_of_a_held_out_clip_from_any_gait_phase(shipped):
                                      phase=True)
         chex.assert_shape(t.phase_NxT, (search_lib.WINDOWS, cfg.data.window_T))
         found.append(search_lib.search_style(state, codes, names, t))
-    assert [f.loss_kind for f in found] == ["phase_stats"] * 3
+    assert [f.loss_kind for f in found] == ["phase"] * 3
     assert [f.nearest[0][0] for f in found] == ["OldMan"] * 3, [f.mix() for f in found]
     weights = np.stack([f.weights_C for f in found])
     assert np.abs(weights - weights[0]).max() < 0.2, weights

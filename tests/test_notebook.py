@@ -132,7 +132,7 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
     assert Path(ns["clip"]).name == "OldMan_05.bvh"
     found = ns["found"]
     chex.assert_shape(found.w_D, (D,))
-    assert found.loss_kind == "phase_stats" and np.isfinite(found.final_loss_K).all()
+    assert found.loss_kind == "phase" and np.isfinite(found.final_loss_K).all()
     assert found.loss <= float(found.screen_C.min()) * 1.001
     assert abs(float(found.weights_C.sum()) - 1) < 1e-5 and found.starts[0] == names[int(np.argmin(found.screen_C))]
     chex.assert_shape(ns["target"].root_NxTx3, (search.WINDOWS, ns["cfg"].data.window_T, 3))

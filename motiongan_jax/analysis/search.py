@@ -7,18 +7,17 @@ w = Σ_c a_c w_c, a = softmax(logits), by Adam on the logits in one jitted scan,
 The mix is what the style language writes as "A:0.6,B:0.3,..." (generate.styles), so a found
 style walks anywhere, from the command line or the page. Nothing touches the model's state.
 
-The loss (LOSSES, measured in docs/RESULTS.md §22) adds up parts (PARTS), each in units of its
-value at the best known style as it is (so that a loss under 1 fits better than every known style):
-- "clock": G walks each window on its own clock (phase offset 0) and is compared sample for sample
-  (0.01 MSE of root velocity + MSE of pose rows, the reference's reconstruction);
-- "phase": the same comparison with G walking each window at the window's measured gait phase
-  (`G(curve, w, phase_BxT=...)`, as the training's reconstruction term does), over the samples
-  where the phase is measured, so that a walker out of step with the clip is not punished for it;
-- "stats": phase-free statistics of each window in its walker's frame, G on its own clock (the
-  mean and spread of every pose row, the speed of every row, the spread of the vertical root
-  speed): what G's own gait looks like in that style, cadence included;
-- "phase_stats": "phase" + "stats", the default for a G with a gait clock (LOSS); a G without
-  one (the paper's) has no phase to walk at and gets "stats" (NO_CLOCK_LOSS).
+The loss (LOSSES), in units of its value at the best known style as it is (a loss under 1 fits
+better than every known style):
+- "phase", for a G with a gait clock (LOSS): G walks each window at the window's measured gait
+  phase (`G(curve, w, phase_BxT=...)`, as the training's reconstruction term does) and is compared
+  sample for sample (0.01 MSE of root velocity + MSE of pose rows) over the samples where the phase
+  is measured, so that a walker out of step with the clip is not punished for it;
+- "stats", for a G without one (the paper's, NO_CLOCK_LOSS): phase-free statistics of each window
+  in its walker's frame, G on its own timing (the mean and spread of every pose row, the speed of
+  every row, the spread of the vertical root speed).
+docs/RESULTS.md §22 measures them against the reference's comparison on G's own clock and against
+their sum, which are not kept.
 """
 
 from __future__ import annotations
@@ -42,9 +41,7 @@ from motiongan_jax.model import apply as model_apply
 from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M, RowLayout
 
-# the loss's parts (module doc): each loss, the parts it adds up
-PARTS = {"clock": ("clock",), "phase": ("phase",), "stats": ("stats",), "phase_stats": ("phase", "stats")}
-LOSSES = tuple(PARTS)
+LOSSES = ("phase", "stats")  # the module doc
 LOSS = "phase"  # for a G with a gait clock (search_loss)
 NO_CLOCK_LOSS = "stats"  # for one without (the paper's G): it has no phase to walk at
 WINDOWS = 4  # windows of the model's T per motion, spread over it
@@ -81,13 +78,13 @@ def window_stats(root_vel_BxTx3, pose_BxTxR, length_unit: float = LENGTH_UNIT_M)
                            -1) / length_unit
 
 
-def window_losses(part: str, root_vel_BxTx3, pose_BxTxR, target_vel_BxTx3, target_pose_BxTxR, valid_BxT,
+def window_losses(loss: str, root_vel_BxTx3, pose_BxTxR, target_vel_BxTx3, target_pose_BxTxR, valid_BxT,
                   length_unit: float = LENGTH_UNIT_M):
-    """One part of the search's loss for each of B windows (PARTS): "stats" compares
-    `window_stats`; "clock" and "phase" compare sample for sample (VEL_WEIGHT · MSE of root
-    velocity + MSE of pose rows, in `length_unit`s) over the samples `valid_BxT` marks. v[0] is left
-    out: it is a reflected duplicate, not a step (trajectory.velocity)."""
-    if part == "stats":
+    """The search's loss (LOSSES) of each of B windows: "stats" compares `window_stats`; "phase"
+    compares sample for sample (VEL_WEIGHT · MSE of root velocity + MSE of pose rows, in
+    `length_unit`s) over the samples `valid_BxT` marks. v[0] is left out: it is a reflected
+    duplicate, not a step (trajectory.velocity)."""
+    if loss == "stats":
         d = window_stats(root_vel_BxTx3, pose_BxTxR, length_unit) - window_stats(
             target_vel_BxTx3, target_pose_BxTxR, length_unit)
         return jnp.mean(jnp.square(d), -1)
@@ -101,45 +98,31 @@ def window_losses(part: str, root_vel_BxTx3, pose_BxTxR, target_vel_BxTx3, targe
 def _search(g, codes_CxD, vel_NxTx3, tv_NxTx3, tp_NxTxR, phase_NxT, valid_NxT, lr, *, loss: str, keep: int,
             steps: int):
     C, N = codes_CxD.shape[0], vel_NxTx3.shape[0]
-    parts = PARTS[loss]
 
     def tile(a, k):
         return jnp.tile(a, (k,) + (1,) * (a.ndim - 1))
 
-    def components(w_KxD):
-        """K x P: each part of the loss of each code, averaged over the windows."""
+    def mean_loss(w_KxD):
+        """(K,): the loss of each code, averaged over the windows."""
         k = w_KxD.shape[0]
         vel, w = tile(vel_NxTx3, k), jnp.repeat(w_KxD, N, axis=0)
-        own = "clock" in parts or "stats" in parts  # G on its own clock
-        if "phase" not in parts:
-            walks = {"clock": model_apply.g_apply(g, vel, w)}
-        else:  # G at the windows' measured phase, and on its own clock in the same call (one batch)
-            phase = tile(phase_NxT, k)
-            if own:
-                phase = jnp.concatenate([phase, model_apply.generator(g).walked_phase(vel, w)])
-                vel, w = jnp.concatenate([vel, vel]), jnp.concatenate([w, w])
-            rv, pose = model_apply.g_apply(g, vel, w, None, phase)
-            walks = {"phase": (rv[: k * N], pose[: k * N]), "clock": (rv[k * N:], pose[k * N:])}
-        vel = vel[: k * N]
-        out = []
-        for part in parts:
-            rv, pose = walks["phase" if part == "phase" else "clock"]
-            valid = tile(valid_NxT, k) if part == "phase" else jnp.ones((k * N, vel.shape[1]), bool)
-            out.append(jnp.mean(window_losses(part, rv, pose, tile(tv_NxTx3, k), tile(tp_NxTxR, k),
-                                              valid).reshape(k, N), 1))
-        return jnp.stack(out, -1)
+        if loss == "phase":  # G at the windows' measured phase
+            rv, pose = model_apply.g_apply(g, vel, w, None, tile(phase_NxT, k))
+        else:  # G on its own timing
+            rv, pose = model_apply.g_apply(g, vel, w)
+        per = window_losses(loss, rv, pose, tile(tv_NxTx3, k), tile(tp_NxTxR, k), tile(valid_NxT, k))
+        return jnp.mean(per.reshape(k, N), 1)
 
-    # each part in units of its value at the best known style as it is, so that parts of other
-    # units add up, and a loss under 1 fits better than every known style
-    screen_CxP = components(codes_CxD)
-    scale_P = jnp.maximum(jnp.min(screen_CxP, 0), 1e-8 * jnp.max(screen_CxP, 0) + 1e-30)
-    screen_C = jnp.sum(screen_CxP / scale_P, -1)
+    # in units of the best known style's loss as it is: a loss under 1 fits better than every one
+    raw_C = mean_loss(codes_CxD)
+    scale = jnp.maximum(jnp.min(raw_C), 1e-8 * jnp.max(raw_C) + 1e-30)
+    screen_C = raw_C / scale
     _, top_K = jax.lax.top_k(-screen_C, keep)
     rest = (1.0 - START_WEIGHT) / max(C - 1, 1)
     logits0 = jnp.log(jnp.where(jnp.arange(C)[None] == top_K[:, None], START_WEIGHT, rest))
 
     def losses(logits_KxC):
-        return jnp.sum(components(jax.nn.softmax(logits_KxC, -1) @ codes_CxD) / scale_P, -1)
+        return mean_loss(jax.nn.softmax(logits_KxC, -1) @ codes_CxD) / scale
 
     tx = optax.adam(search_schedule(lr, steps, max(steps // 10, 1)), b1=0.5, b2=0.999)
 
@@ -206,9 +189,9 @@ def search_style(model, codes_CxD, style_names: Sequence[str], target: MotionWin
     if target.phase_NxT is None:
         raise ValueError("the target has no gait phase: cut it with a layout and fps (clips.windows_from_rows)")
     valid = np.asarray(target.phase_valid_NxT, bool)
-    if "phase" in PARTS[loss] and not model_apply.has_gait_phase(model):
-        raise ValueError(f"loss {loss!r} walks G at a measured phase, but this G has no gait clock")
-    if "phase" in PARTS[loss] and valid[:, 1:].sum() == 0:
+    if loss == "phase" and not model_apply.has_gait_phase(model):
+        raise ValueError("the loss 'phase' walks G at a measured phase, but this G has no gait clock")
+    if loss == "phase" and valid[:, 1:].sum() == 0:
         raise AnalysisError(f"{target.source or 'the motion'}: no steps found (its toes do not alternate), "
                             "so it has no walking style to recover")
     keep = max(1, min(int(keep), C))
@@ -243,13 +226,13 @@ def nearest_to(w_D, codes_CxD, style_names: Sequence[str], k: int = 3) -> list[l
 
 
 def reconstruct(model, target: MotionWindows, w_D, loss: str | None = None):
-    """G's (root_vel, pose) for every window of the target with one code w, walked at the windows'
-    measured phase when the search's loss does so (PARTS), else on G's own clock."""
+    """G's (root_vel, pose) for every window of the target with one code w, walked as the search
+    walks it: at the windows' measured phase under the "phase" loss, else on G's own timing."""
     loss = search_loss(model) if loss is None else loss
     N = target.curve_NxTx3.shape[0]
     w = np.broadcast_to(np.asarray(w_D, np.float32), (N, np.shape(w_D)[-1]))
     vel = trajectory.velocity(target.curve_NxTx3)
-    if "phase" in PARTS[loss]:
+    if loss == "phase":
         return model_apply.apply_code(model, vel, w, phase_BxT=target.phase_NxT)
     return model_apply.apply_code(model, vel, w)
 

@@ -48,8 +48,6 @@ def main(argv=None) -> int:
                     help="held-out clips searched per style (default 1, with --search-only every clip)")
     ap.add_argument("--search-only", action="store_true",
                     help="only the style search on the held-out clips and G's walks of their paths")
-    ap.add_argument("--search-loss", default=None, choices=("clock", "phase", "stats", "phase_stats"),
-                    help="the style search's loss (analysis/search.py; default: the search's own for the model)")
     ap.add_argument("--max-curves", type=int, default=12, help="held-out real curves at most")
     ap.add_argument("--realism-curves", type=int, default=48,
                     help="held-out paths walked like for like in the realism part, at most (0: skip it)")
@@ -120,7 +118,7 @@ def _search_only(args) -> int:
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.train import checkpoint
 
-    settings = style_recovery.Settings(clips_per_style=args.search_clips, loss=args.search_loss,
+    settings = style_recovery.Settings(clips_per_style=args.search_clips,
                                        **({} if args.search_steps is None else {"steps": args.search_steps}))
     try:
         result, header = protocol.search_run(args.workdir, settings, step=args.step, params=args.params,

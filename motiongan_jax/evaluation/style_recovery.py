@@ -33,7 +33,6 @@ WALK_BUCKETS = (128, 256, 512, 1024)  # G's walks of the clips' paths are padded
 
 @dataclasses.dataclass(frozen=True)
 class Settings:
-    loss: str | None = None  # None: the search's own (search.search_loss)
     windows: int = search_lib.WINDOWS
     keep: int = search_lib.KEEP
     steps: int = search_lib.STEPS
@@ -113,7 +112,7 @@ def recovery(state, meta: dict, cfg, layout, val_clips, style_names: Sequence[st
     rows: dict[str, list] = {"real": [], "own": []}
     skipped = []
     clips = clip_order(val_clips, settings.clips_per_style)
-    opts = dict(loss=settings.loss, keep=settings.keep, steps=settings.steps)
+    opts = dict(keep=settings.keep, steps=settings.steps)
     for i, clip in enumerate(clips):
         label = names.index(clip.label.style)
         try:
