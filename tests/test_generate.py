@@ -24,7 +24,7 @@ from motiongan_jax.data import curves, synthetic
 from motiongan_jax.generate import limits, styles, user_curves, walk, writers
 from motiongan_jax.model import apply as model_apply
 from motiongan_jax.motion import bvh, ik, kinematics, representation, trajectory
-from motiongan_jax.train import checkpoint
+from motiongan_jax.train import checkpoint, pretrained
 from motiongan_jax.train import state as train_state
 
 T_LONG = 96
@@ -613,6 +613,26 @@ def test_cli_errors_exit_non_zero_and_leave_no_file(run_dir, cli, tmp_path, caps
     err = capsys.readouterr().err
     assert err.splitlines()[-1].startswith("error: ") and re.search(match, err), err
     assert set(p.name for p in tmp_path.iterdir()) == before  # nothing written, no temp file
+
+
+def test_cli_style_from_a_clip_walks_its_recovered_mix(cli, tmp_path, capsys):
+    """--style-from: the shipped model recovers a held-out clip's style (it knows OldMan), prints it
+    as a mix, and walks that mix (the same w as --style with the printed text) at the clip's speed."""
+    clip = synthetic.default_dataset_dir() / "OldMan_05.bvh"
+    out = tmp_path / "like.npz"
+    assert cli(["--style-from", str(clip), "--curve", "line", "--length", "3", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    m = re.search(r"style of \S*OldMan_05\.bvh: (\S+) \(nearest known styles: OldMan \(", err)
+    assert m, err
+    speed = float(re.search(r"walking at the clip's speed, ([\d.]+) m/s", err).group(1))
+    assert 0.5 < speed < 2.5
+    meta = pretrained.read_export(pretrained.SHIPPED_MODEL).meta
+    state = pretrained.load_model()[0]
+    want = styles.spec_codes(state, [styles.parse_style(m.group(1), meta["style_names"])], meta["style_names"])
+    with np.load(out) as z:
+        np.testing.assert_allclose(z["w"], want[0], atol=1e-6)
+        # a 3 m line at the clip's speed: one sample per speed / 15 Hz metres
+        assert abs(len(z["positions"]) - (3.0 / (speed / 15.0) + 1)) <= 1.5
 
 
 def test_cli_mp4_without_ffmpeg_is_a_clear_error(run_dir, cli, tmp_path, capsys, monkeypatch):

@@ -6,6 +6,7 @@
   python bin/generate.py --workdir runs/small --figure interp --style Sad,Happy --curve line --length 8 --out fig.png
   python bin/generate.py --workdir runs/small --list-styles
   python bin/generate.py --style Happy --curve s_curve --out walk.gif     # the shipped model
+  python bin/generate.py --style-from clip.bvh --curve circle --out like_clip.gif    # walk like this clip
 
 --workdir: a training run (its latest checkpoint, or --step); --model: an export file
 (bin/export_model.py); neither: the model shipped with the package (motiongan_jax/weights/).
@@ -27,6 +28,11 @@ per motion; metres, Y up, +Z forward). --rig RIG (a BVH file or a built-in rig: 
 bandai) retargets .bvh and glTF output onto that skeleton (joints matched by name through the
 built-in maps, or --rig-map MAP.json of role -> joint name; --rig-units when its units are not
 guessed right); its notes give the feet's skate and floor penetration beside the model's.
+--style-from CLIP.bvh (or an .npz of world positions, bin/prepare_data.py's): the clip's style,
+recovered by style search (analysis/search.py) as a mix of the model's styles, which stderr prints
+("style of CLIP: Sad:0.62,Happy:0.31,..."; give it to --style to walk it again without searching),
+walked along --curve at the clip's own speed unless --speed is given. The clip must be on the
+model's skeleton (its training data's joints and units) and walk for at least one window (2 s).
 --figure styles|interp|arith: the paper's Fig. 4 (--style "A,B,C" or all styles), Fig. 6
 (--style "A,B": α = 0, 1/4, 1/2, 3/4, 1) and Fig. 7 (--style "A - B + C": operands and result).
 Notes (the curve's sampling, the BVH's best-fit error) go to stderr, written paths to stdout.
@@ -69,6 +75,8 @@ def main(argv=None) -> int:
     add_model_arguments(ap)
     ap.add_argument("--list-styles", action="store_true", help="print the model's style names and exit")
     ap.add_argument("--style", default=None)
+    ap.add_argument("--style-from", default=None, metavar="CLIP",
+                    help="a BVH clip (or .npz of world positions): walk in its recovered style")
     ap.add_argument("--curve", default=None)
     ap.add_argument("--out", default=None)
     ap.add_argument("--length", type=float, default=None, help="shape curves: arc length in metres")
@@ -91,11 +99,14 @@ def main(argv=None) -> int:
                          "children best-fit; exact: every bone direction exact, zero-length branch joints added")
     args = ap.parse_args(argv)
 
+    import numpy as np
+
     from motiongan_jax.data import curves
     from motiongan_jax.generate import limits, styles, user_curves, walk, writers
 
     if not 0 <= args.seed <= limits.MAX_SEED:  # the demo's API takes the same seeds
         ap.error(f"--seed must be an integer 0..{limits.MAX_SEED}, got {args.seed}")
+    from motiongan_jax.analysis.style_space import AnalysisError
     from motiongan_jax.motion import rigs
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.motion.gltf import GLTFError
@@ -105,14 +116,16 @@ def main(argv=None) -> int:
     if args.rig is None and (args.rig_map or args.rig_units):
         ap.error("--rig-map and --rig-units go with --rig")
     errors = (limits.GenerateError, checkpoint.CheckpointError, curves.DegenerateCurveError,
-              curves.CurveFileError, BVHError, IKError, rigs.RigError, GLTFError, OSError)
+              curves.CurveFileError, BVHError, IKError, rigs.RigError, GLTFError, AnalysisError, OSError)
     try:
         if args.list_styles:
             print("\n".join(pretrained.model_meta(args.workdir, args.step, args.model)["style_names"]))
             return 0
         missing = [f"--{n}" for n in ("curve", "out") if getattr(args, n) is None]
-        if args.style is None and args.figure != "styles":
-            missing.insert(0, "--style")
+        if args.style_from is not None and (args.style is not None or args.figure):
+            ap.error("--style-from gives the style: use it without --style and --figure")
+        if args.style is None and args.style_from is None and args.figure != "styles":
+            missing.insert(0, "--style (or --style-from)")
         if missing:
             ap.error(f"missing {', '.join(missing)} (or use --list-styles)")
         writers.check_output_path(args.out, rig=args.rig is not None)  # fail before the model is loaded
@@ -125,6 +138,16 @@ def main(argv=None) -> int:
         z_arg = args.z
         state, meta, cfg, layout = pretrained.load_model(args.workdir, args.step, args.params, args.model)
         names = list(meta["style_names"])
+        speed = args.speed
+        if args.style_from is not None:
+            found, clip_speed = _style_from(args.style_from, state, meta, cfg, layout)
+            args.style = found.mix_text()
+            near = ", ".join(f"{n} ({d:.3g})" for n, d in found.nearest[:3])
+            _log(f"style of {args.style_from}: {args.style} (nearest known styles: {near}; "
+                 f"search {found.seconds:.1f} s)")
+            if speed is None:
+                speed = float(np.clip(clip_speed, *limits.SPEED_RANGE_M_PER_S))
+                _log(f"walking at the clip's speed, {speed:.2f} m/s (--speed to change it)")
         if args.figure:
             panels = styles.figure_specs(args.figure, args.style, names, args.seed)
         else:
@@ -134,7 +157,7 @@ def main(argv=None) -> int:
         rate = walk.sample_rate(meta, cfg)
         curve = user_curves.load_curve(args.curve, length=args.length, scale=args.scale,
                                    control_seconds=cfg.data.control_point_interval / float(meta["fps"]))
-        curve_M = user_curves.prepare_curve(curve, rate, args.speed, log=_log)
+        curve_M = user_curves.prepare_curve(curve, rate, speed, log=_log)
         count = len(panels) * len(z)
         writers.check_output_size(args.out, len(curve_M), count)  # before any work
         w = styles.spec_codes(state, [s for _, s in panels], names, z)
@@ -149,3 +172,16 @@ def main(argv=None) -> int:
     for p in paths:
         print(p)
     return 0
+
+
+def _style_from(path, state, meta, cfg, layout):
+    """(analysis.search.StyleFound, the clip's speed in m/s) of a clip file."""
+    from motiongan_jax.analysis import clips, search, style_space
+    from motiongan_jax.generate import walk
+
+    root, pose, fps = clips.load_motion(path, meta, cfg, layout)
+    target = clips.model_rate_windows(root, pose, fps, meta, cfg, layout, spread=search.WINDOWS, phase=True,
+                                      source=str(path))
+    codes = style_space.label_codes(state, meta["style_names"], k=1).zero_CxD
+    found = search.search_style(state, codes, meta["style_names"], target)
+    return found, target.spacing_m * walk.sample_rate(meta, cfg)
