@@ -309,6 +309,28 @@ def test_concurrent_requests_each_get_their_own_answer(engine, client):
         thread.join(10)
 
 
+def test_an_uploaded_clip_is_a_mix_the_page_can_walk(client, engine):
+    """/api/clip: a held-out clip of the embedded dataset (the model's skeleton) gives a mix of the
+    known styles, its nearest styles and its speed; the mix walks as a style of /api/generate."""
+    from pathlib import Path
+
+    data = (Path(engine.meta["data_dir"]) / "Happy_05.bvh").read_bytes()
+    r = client.post("/api/clip?name=Happy_05.bvh", data=data, content_type="application/octet-stream")
+    assert r.status_code == 200, r.get_json()
+    res = r.get_json()
+    assert res["name"] == "Happy_05.bvh" and res["windows"] == 4 and res["fps"] == 60.0
+    assert abs(sum(a for _, a in res["mix"]) - 1) < 0.01 and {n for n, _ in res["mix"]} <= set(engine.style_names)
+    assert [n for n, _ in res["nearest"]] and all(n in engine.style_names for n, _ in res["nearest"])
+    motion = bvh.parse_bvh(data.decode())
+    assert res["frames"] == motion.num_frames - engine.cfg.data.start_offset
+    assert res["seconds"] == pytest.approx(res["frames"] / 60.0, abs=0.01)
+    # the embedded dataset walks at 1.2-1.5 m/s; the clip's speed is the windows' curve spacing
+    assert 0.5 < res["speed"] < 2.5
+    assert styles_lib.parse_style(res["style"], engine.style_names).kind in ("mix", "label")
+    r = _post(client, "/api/generate", {"points": _line(32), "styles": [res["style"]], "speed": res["speed"]})
+    assert r.status_code == 200, r.get_json()
+
+
 def test_cli_refuses_bad_arguments(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         server.main(["--port", "70000"])
@@ -365,8 +387,9 @@ def test_warm_up_compiles_what_the_page_can_ask_for(engine):
     info = fresh.info()
     assert info["compiled"] == [(48, 1)] and info["warm"] and info["compile_s"] is not None
     assert info["walker_warm"]
-    # every z's codes, the steer mode's stream window, then G, each in a slot
-    assert ran == ["_spec_codes"] * E.MAX_SAMPLES_Z + ["_warm_walker", "run"]
+    # every z's codes, the steer mode's stream window, G, then the style search of an uploaded clip,
+    # each in a slot
+    assert ran == ["_spec_codes"] * E.MAX_SAMPLES_Z + ["_warm_walker", "run", "_warm_clip"]
 
 
 def test_the_compilation_cache_folder_is_the_users_unless_told(monkeypatch, tmp_path):

@@ -6,8 +6,9 @@ runs and that the canvas shows the skeleton (pixels of the bones' colours that w
 before), downloads the BVH and reads it with bvh.py, and types a bad expression to see generate's
 message on the page. The character view: three.js draws the downloaded GLB's skinned body, and the
 rig picker changes the skeleton. The steer mode: a minute of walking steered by key presses, in
-two styles. Without chromium or Playwright it fails under CI (which installs both, see
-.ci/run) and skips elsewhere, saying what to install.
+two styles. Walk like this clip: drops a BVH clip on the page and walks its recovered style.
+Without chromium or Playwright it fails under CI (which installs both, see .ci/run) and skips
+elsewhere, saying what to install.
 """
 
 import os
@@ -259,6 +260,69 @@ def test_the_character_is_the_glb_and_the_rig_picker_changes_it(playwright_api, 
             assert dl.value.suggested_filename == "motiongan_Normal_smpl.glb"
             page.wait_for_timeout(300)
             assert _body_pixels(page.locator("#view").screenshot()) > 2000
+            assert not errors, errors
+        finally:
+            browser.close()
+
+
+def _drop_file(page, selector: str, name: str, data: bytes) -> None:
+    """Drop a file on an element as a user's drag and drop does: a drop event carrying it."""
+    page.evaluate("""([selector, name, bytes]) => {
+        const dt = new DataTransfer();
+        dt.items.add(new File([new Uint8Array(bytes)], name, {type: "application/octet-stream"}));
+        const el = document.querySelector(selector);
+        el.dispatchEvent(new DragEvent("dragover", {dataTransfer: dt, bubbles: true, cancelable: true}));
+        el.dispatchEvent(new DragEvent("drop", {dataTransfer: dt, bubbles: true, cancelable: true}));
+    }""", [selector, name, list(data)])
+
+
+def test_drop_a_clip_see_its_style_as_a_mix_and_walk_it(playwright_api, demo_url, tmp_path):
+    """Walk like this clip: a held-out clip of the embedded dataset dropped on the page shows its
+    recovered style as a mix of the known styles (the server's answer, drawn as bars), and the
+    active panel walks that mix on the drawn path at the clip's speed. A bad file gets the
+    server's message on the page, and the walk stays as it was."""
+    from motiongan_jax.data import synthetic
+
+    names = pretrained.read_export(pretrained.SHIPPED_MODEL).meta["style_names"]
+    clip = synthetic.default_dataset_dir() / "OldMan_05.bvh"  # held out: trial 5 of 5
+    with playwright_api() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 860})
+            errors = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(demo_url)
+            page.wait_for_selector("#mode-label .chip")
+            page.locator("#presets button", has_text="Circle").click()
+            page.wait_for_function("window.demo.state.strokes.length === 1")
+            _wait_generated(page, 0)  # the circle, walked in the first style
+            with page.expect_response("**/api/clip?name=OldMan_05.bvh", timeout=300_000) as answer:
+                _drop_file(page, "#clip-drop", clip.name, clip.read_bytes())
+            assert answer.value.status == 200, answer.value.text()
+            res = answer.value.json()
+            page.wait_for_selector("#clip-mix")
+            shown = page.locator("#clip-mix span").all_inner_texts()
+            assert shown[0::3] == [n for n, _ in res["mix"]] and set(shown[0::3]) <= set(names)
+            assert shown[2::3] == [f"{round(100 * a)}%" for _, a in res["mix"]]
+            assert res["nearest"][0][0] == "OldMan", res  # the shipped model knows this style
+            head = page.locator("#clip-result .muted").inner_text()
+            assert head.startswith(f"OldMan_05.bvh: {res['seconds']:.1f} s at {res['speed']:.2f} m/s · nearest OldMan")
+            # the active panel now walks the mix, at the clip's speed, on the circle
+            want = ",".join(f"{n}:{a:g}" for n, a in res["mix"] if a > 0)
+            assert page.locator("#style-string").inner_text() == f"style: {want}"
+            assert page.locator("#speed-value").inner_text() == f"{res['speed']:.2f} m/s"
+            page.wait_for_function(f"window.demo.state.result && !window.demo.state.inflight && "
+                                   f"window.demo.state.result.motions[0].title === {want!r}", timeout=300_000)
+            assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
+
+            # a file on another skeleton, chosen with the file input: the server's 400, on the page
+            bad = tmp_path / "other.bvh"
+            bad.write_text(clip.read_text().replace("JOINT LeftUpLeg", "JOINT LeftThigh"))
+            page.set_input_files("#clip-file", str(bad))
+            page.wait_for_function("document.getElementById('clip-result').classList.contains('bad')")
+            msg = page.locator("#clip-result").inner_text()
+            assert msg.startswith("other.bvh: not the model's skeleton") and "LeftThigh" in msg, msg
+            assert page.evaluate("window.demo.state.result.motions[0].title") == want
             assert not errors, errors
         finally:
             browser.close()

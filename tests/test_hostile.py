@@ -15,6 +15,7 @@ import socket
 import threading
 import urllib.error
 import urllib.request
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -230,6 +231,92 @@ def test_exports_draw_outside_the_generation_slot(engine, monkeypatch):
 
 
 # ---------------------------------------------------------------------------------------------
+# uploaded clips (/api/clip): bounded, parsed in memory by the strict reader, a 400 naming the problem
+
+
+@pytest.fixture(scope="module")
+def clip_bvh(engine) -> str:
+    """A held-out clip of the embedded dataset (the engine's skeleton and units), as text."""
+    return (Path(engine.meta["data_dir"]) / "Sad_05.bvh").read_text()
+
+
+def _frames(text: str) -> tuple[str, list[str]]:
+    head, _, frames = text.partition("Frame Time:")
+    time_line, _, body = frames.partition("\n")
+    return head + "Frame Time:" + time_line + "\n", body.strip("\n").split("\n")
+
+
+def _with_frames(text: str, fn) -> str:
+    head, lines = _frames(text)
+    return head + "\n".join(fn(lines)) + "\n"
+
+
+def _still(lines):  # the root's translation held at its first frame's: a walker that stands
+    first = lines[0].split()[:3]
+    return [" ".join(first + line.split()[3:]) for line in lines]
+
+
+def _scaled_offsets(text: str, k: float) -> str:
+    def scale(m):
+        return "OFFSET " + " ".join(f"{k * float(v):.4f}" for v in m.group(1).split())
+
+    return re.sub(r"OFFSET ([-\d. ]+)", scale, text)
+
+
+def _many_joints(n: int) -> str:
+    body = "".join(f"JOINT J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 3 Zrotation Yrotation Xrotation\n" for i in range(n))
+    return ("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation "
+            "Xrotation\n" + body + "}\n" * (n + 1) + "MOTION\nFrames: 1\nFrame Time: 0.1\n" + "0 " * (6 + 3 * n) + "\n")
+
+
+@pytest.mark.parametrize("case, status, match", [
+    ("empty", 400, r"empty file"),
+    ("junk", 400, r"clip\.bvh:1: expected HIERARCHY"),
+    ("truncated", 400, r"clip\.bvh:\d+: (fewer frames than declared|wrong number of values)"),
+    ("nan", 400, r"clip\.bvh:\d+: NaN or infinite value 'nan' in frame 3"),
+    ("inf offset", 400, r"clip\.bvh:\d+: NaN or infinite OFFSET value"),
+    ("huge", 413, r"too large: the demo takes at most 4096 KiB \(a BVH file\)"),
+    ("many frames", 400, r"clip\.bvh:\d+: 1000000000 frames; at most 18000 are read"),
+    ("many joints", 400, r"clip\.bvh:\d+: more than 128 joints"),
+    ("wrong skeleton", 400, r"not the model's skeleton: of the \d+ joints the model moves .* it lacks LeftUpLeg; "
+                            r"has LeftThigh besides"),
+    ("wrong unit", 400, r"the walker is [\d.e+]+ m tall at 0.056444 m per file unit, not 0.5-3 m"),
+    ("standing", 400, r"the root moves 0 m/s on average: not a walk"),
+    ("too short", 400, r"shorter than one window \(\d+ samples x step 4 = \d+ frames, [\d.]+ s\)"),
+])
+def test_hostile_clips_are_4xx_naming_the_problem(client, no_g, clip_bvh, case, status, match):
+    head, lines = _frames(clip_bvh)
+    data = {
+        "empty": "",
+        "junk": "\x00\xff binary junk",
+        "truncated": clip_bvh[: len(clip_bvh) * 3 // 5],
+        "nan": _with_frames(clip_bvh, lambda ls: ls[:2] + [" ".join(ls[2].split()[:7] + ["nan"] + ls[2].split()[8:])]
+                            + ls[3:]),
+        "inf offset": clip_bvh.replace("OFFSET 0.0000 -7.5000 0.0000", "OFFSET 0.0000 inf 0.0000", 1),
+        "huge": clip_bvh * (E.MAX_CLIP_BYTES // len(clip_bvh) + 1),
+        "many frames": re.sub(r"Frames: \d+", "Frames: 1000000000", clip_bvh),
+        "many joints": _many_joints(E.MAX_CLIP_JOINTS + 10),
+        "wrong skeleton": clip_bvh.replace("JOINT LeftUpLeg", "JOINT LeftThigh"),
+        "wrong unit": _scaled_offsets(clip_bvh, 100.0),
+        "standing": _with_frames(clip_bvh, _still),
+        "too short": re.sub(r"Frames: \d+", "Frames: 40", head) + "\n".join(lines[:40]) + "\n",
+    }[case]
+    r = client.post("/api/clip?name=clip.bvh", data=data.encode("latin-1", "replace") if case == "junk"
+                    else data.encode(), content_type="application/octet-stream")
+    assert r.status_code == status, r.get_json()
+    msg = r.get_json()["error"]
+    assert re.search(match, msg), msg
+    assert "Traceback" not in msg
+
+
+def test_clip_names_are_sanitised_and_bodies_not_json_are_fine(client, no_g):
+    r = client.post("/api/clip?name=" + "../" * 50 + "%00<b>.bvh", data=b"HIERARCHY\n", content_type="text/plain")
+    msg = r.get_json()["error"]
+    name = msg.split(":")[0]
+    assert r.status_code == 400 and name.endswith("b_.bvh") and not set("/<>\x00") & set(name), msg
+
+
+# ---------------------------------------------------------------------------------------------
 # the real server (waitress): chunked bodies, bursts, memory, the command line
 
 
@@ -329,6 +416,27 @@ def test_generate_cli_refuses_bad_numbers_with_exit_2(tmp_path, extra, match):
     code, _, err = run_cli("generate", ["--style", "Sad", "--curve", "line", "--out", out, *extra])
     assert code == 2 and re.search(match, err), err
     assert "Traceback" not in err and not out.exists()
+
+
+@pytest.mark.parametrize("case, match", [
+    ("missing", r"no such file"),
+    ("nan", r"bad\.bvh:\d+: NaN or infinite value"),
+    ("wrong skeleton", r"bad\.bvh: not the model's skeleton"),
+    ("standing", r"bad\.bvh: the root moves 0 m/s on average: not a walk"),
+])
+def test_generate_style_from_a_bad_clip_exits_2_naming_the_problem(tmp_path, clip_bvh, no_g, case, match):
+    """The shipped model (the embedded skeleton): every refusal comes before G."""
+    bad = tmp_path / "bad.bvh"
+    if case != "missing":
+        bad.write_text({"nan": _with_frames(clip_bvh, lambda ls: ["nan " + ls[0].split(" ", 1)[1]] + ls[1:]),
+                        "wrong skeleton": clip_bvh.replace("JOINT LeftUpLeg", "JOINT LeftThigh"),
+                        "standing": _with_frames(clip_bvh, _still)}[case])
+    out = tmp_path / "w.npz"
+    code, _, err = run_cli("generate", ["--style-from", bad, "--curve", "line", "--out", out])
+    assert code == 2 and re.search(match, err), err
+    assert "Traceback" not in err and not out.exists()
+    code, _, err = run_cli("generate", ["--style-from", bad, "--style", "Sad", "--curve", "line", "--out", out])
+    assert code == 2 and "--style-from gives the style: use it without --style" in err
 
 
 @pytest.mark.parametrize("style", ["Sad:1e308,Happy:1e308", "Sad*2"])  # the others: the API test above

@@ -30,10 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
+from motiongan_jax.analysis import clips as clips_lib
+from motiongan_jax.analysis import search as search_lib
+from motiongan_jax.analysis import style_space
 from motiongan_jax.data import curves
 from motiongan_jax.generate import limits, stream, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
-from motiongan_jax.motion import rigs
+from motiongan_jax.motion import bvh, rigs
 
 # Limits the server enforces on every request (each breach is a 400 naming it): an interactive
 # page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
@@ -54,6 +57,11 @@ WARM_FIRST_SAMPLES = 256  # warm_up compiles the buckets up to here first (21 s 
 EXPORT_FORMATS = {"bvh": "text/plain", "npz": "application/octet-stream", "gif": "image/gif",
                   "glb": "model/gltf-binary"}
 RIG_FORMATS = ("bvh", "glb")  # what a walk on a built-in rig can be downloaded as
+# "Walk like this clip": an uploaded BVH file (read in memory by the strict reader, never written)
+MAX_CLIP_BYTES = 4 * 2**20  # inside analysis.clips.MAX_CLIP_BYTES, like its frames and joints
+MAX_CLIP_FRAMES = 18_000  # 5 minutes at 60 fps, 2.5 at 120
+MAX_CLIP_JOINTS = 128
+MAX_CLIP_NAME = 120
 DIGITS = 4  # decimals of the metres sent to the page (0.1 mm)
 
 
@@ -217,6 +225,7 @@ class Engine:
         self._compile_times: list[float] = []  # seconds of each first run at a new pair
         self._codes: collections.OrderedDict = collections.OrderedDict()
         self._codes_lock = threading.Lock()
+        self._zero: np.ndarray | None = None  # the known styles' codes at z = 0 (clip_style)
 
     # -- model facts for the page ---------------------------------------------------------------
     def info(self) -> dict:
@@ -416,6 +425,46 @@ class Engine:
                                           z_per_motion=zs, rig=rig)
             return paths[0].read_bytes(), name, EXPORT_FORMATS[fmt]
 
+    # -- walk like this clip --------------------------------------------------------------------
+    def clip_style(self, data: bytes, name: str = "clip.bvh") -> dict:
+        """The page's /api/clip: an uploaded BVH file's style as a mix of the known styles
+        (analysis.search.search_style), its nearest styles and its speed. The file is bounded
+        (MAX_CLIP_BYTES, MAX_CLIP_FRAMES, MAX_CLIP_JOINTS) and parsed in memory by the strict
+        reader; a malformed one, a skeleton that is not the model's or a motion without steps is a
+        RequestError (400) naming the problem."""
+        t0 = time.perf_counter()
+        name = _safe_name(str(name))[:MAX_CLIP_NAME] or "clip.bvh"
+        if not data:
+            raise RequestError(f"{name}: empty file: expected a BVH file's text")
+        if len(data) > MAX_CLIP_BYTES:
+            raise RequestError(f"{name}: {len(data) / 2**20:.1f} MiB; the demo reads BVH files of at most "
+                               f"{MAX_CLIP_BYTES // 2**20} MiB")
+        text = bvh.decode(data)
+        try:
+            motion = bvh.parse_bvh(text, name, max_joints=MAX_CLIP_JOINTS, max_frames=MAX_CLIP_FRAMES)
+            root, pose, fps = clips_lib.motion_rows(motion, name, self.cfg, self.layout)
+            target = clips_lib.model_rate_windows(root, pose, fps, self.meta, self.cfg, self.layout,
+                                                  spread=search_lib.WINDOWS, phase=True, source=name)
+            found = search_lib.search_style(self.state, self._zero_codes(), self.style_names, target)
+        except (bvh.BVHError, style_space.AnalysisError) as err:
+            raise RequestError(str(err)) from None
+        speed = target.spacing_m * self.rate
+        return {"name": name, "style": found.mix_text(), "mix": found.mix(),
+                "nearest": [[n, round(d, DIGITS)] for n, d in found.nearest[:3]],
+                "speed": round(speed, 3), "frames": int(len(root)), "fps": float(fps),
+                "seconds": round(len(root) / fps, 2), "windows": int(target.root_NxTx3.shape[0]),
+                "search_ms": round(1e3 * found.seconds, 1), "server_ms": round(1e3 * (time.perf_counter() - t0), 1)}
+
+    def _zero_codes(self) -> np.ndarray:
+        """Every known style's code at z = 0 (the codes a mix is made of), computed once."""
+        with self._codes_lock:
+            codes = self._zero
+        if codes is None:
+            codes = np.asarray(style_space.label_codes(self.state, self.style_names, k=1).zero_CxD)
+            with self._codes_lock:
+                self._zero = codes
+        return codes
+
     # -- warm-up --------------------------------------------------------------------------------
     def warm_up(self, run=None, plan=None) -> float:
         """Compiles G for every (sample bucket, batch bucket) of `plan` (default: warm_plan(), all
@@ -435,8 +484,24 @@ class Engine:
             # (T - 1/2) spacings long: exactly T samples, trimmed or padded by nothing
             pts = np.array([[0.0, 0.0], [(T - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate, 0.0]])
             run(self.run, Request(pts, (name,) * B, "zero", 0, None))
+        run(self._warm_clip)
         self._warm.set()
         return time.perf_counter() - t0
+
+    def _warm_clip(self) -> None:
+        """The style search's one program (every upload has the same windows), compiled on G's own
+        walk of an arc."""
+        T = self.cfg.data.window_T
+        n = search_lib.WINDOWS * T
+        pts = curves.shape_curve("circle", length=(n - 0.5) * user_curves.DEFAULT_SPEED_M_PER_S / self.rate,
+                                 scale=3.0, num_points=400)
+        curve = user_curves.prepare_curve(user_curves.Curve(pts, "arc"), self.rate, None)
+        gen = walk.generate_motion(self.state, self.layout, curve, self._zero_codes()[:1])
+        root = gen.positions[0, :, 0]
+        pose = (gen.positions[0, :, 1:] - root[:, None]).reshape(len(root), -1)
+        target = clips_lib.model_rate_windows(root, pose, self.rate, self.meta, self.cfg, self.layout,
+                                              spread=search_lib.WINDOWS, phase=True, source="warm-up")
+        search_lib.search_style(self.state, self._zero_codes(), self.style_names, target)
 
 
 def warm_plan() -> list[tuple[int, int]]:

@@ -13,13 +13,16 @@ Routes (JSON in and out; every refusal is {"error": message} with a 4xx status):
   POST /api/style        {"style": "OldMan - Normal + Marching"}: its parsed form, or the error
   POST /api/generate     {"points", "styles", "z", "seed", "speed"}: the motions (engine.py)
   POST /api/export       the same plus "format" (bvh|npz|gif|glb), "index" and "rig": the file
+  POST /api/clip         a BVH file's bytes as the body (?name=walk.bvh): its style as a mix of the
+                         known styles, its nearest styles and its speed (engine.clip_style)
   POST /api/steer/start  {"style", "z", "seed", "start", "heading", "speed"}: a walker of its own (steer.py)
   POST /api/steer/step   {"session", "from", "ahead", "samples"}: the next samples along the predicted path
   POST /api/steer/style  {"session", "style", "z", "seed"}: blend to another style over a second
   POST /api/steer/stop   {"session"}: the walker is dropped
   GET  /api/steer        how many walkers are live and how much each holds
 Bad input (generate.py's style and curve errors, the demo's limits) is a 400 with the message
-bin/generate.py would print; a body over MAX_BODY_BYTES is a 413 (chunked ones too). Generation
+bin/generate.py would print; a body over MAX_BODY_BYTES (an uploaded clip: engine.MAX_CLIP_BYTES) is a
+413 (chunked ones too); bodies are held in memory, never spooled to disk. Generation
 runs in the request threads, at most MAX_CONCURRENT at once (the others wait up to QUEUE_TIMEOUT_S,
 then get a 503), so many requests cannot pile up memory; an export draws its file after giving
 its generation slot back, MAX_EXPORTS at a time (a GIF takes matplotlib seconds to draw). Steered
@@ -96,7 +99,10 @@ def create_app(engine: engine_lib.Engine) -> Flask:
     @app.errorhandler(HTTPException)
     def http_error(err):
         if err.code == 413:
-            msg = f"request body too large: the demo takes at most {MAX_BODY_BYTES // 1024} KiB"
+            limit = engine_lib.MAX_CLIP_BYTES if request.path == "/api/clip" else MAX_BODY_BYTES
+            msg = f"request body too large: the demo takes at most {limit // 1024} KiB"
+            if request.path == "/api/clip":
+                msg += " (a BVH file)"
         else:
             msg = err.description
         return jsonify(error=msg), err.code
@@ -172,6 +178,15 @@ def create_app(engine: engine_lib.Engine) -> Flask:
         return app.response_class(data, mimetype=mime,
                                   headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
+    @app.post("/api/clip")
+    def clip():
+        # the file is the body (not a form: nothing is parsed into temporary files), read whole in
+        # memory up to the clip's own limit
+        request.max_content_length = engine_lib.MAX_CLIP_BYTES
+        data = request.get_data(cache=False)
+        out = bounded(engine.clip_style, data, request.args.get("name", "clip.bvh"))
+        return jsonify(out)
+
     walkers = steer_lib.Steering(engine)
     app.config["walkers"] = walkers
 
@@ -219,10 +234,13 @@ def make_server(app, host: str, port: int, debug: bool = False):
         return _Server(srv.server_port, srv.serve_forever, lambda: (srv.shutdown(), srv.server_close()))
     from waitress.server import create_server
 
-    # bodies up to twice the limit reach the app, which answers its JSON 413; beyond, waitress's own 413
+    # bodies up to twice the limit reach the app, which answers its JSON 413; beyond, waitress's own
+    # 413. Bodies stay in memory (inbuf_overflow at the limit: waitress would spool larger ones to a
+    # temporary file), so an uploaded clip never touches the disk.
+    body_limit = 2 * max(MAX_BODY_BYTES, engine_lib.MAX_CLIP_BYTES)
     srv = create_server(app, host=host, port=port, threads=THREADS, connection_limit=CONNECTIONS,
                         channel_timeout=IDLE_TIMEOUT_S, cleanup_interval=min(IDLE_TIMEOUT_S, 30),
-                        max_request_body_size=2 * MAX_BODY_BYTES, ident="motiongan-demo",
+                        max_request_body_size=body_limit, inbuf_overflow=body_limit, ident="motiongan-demo",
                         clear_untrusted_proxy_headers=True)
     return _Server(srv.effective_port, srv.run, srv.close)
 

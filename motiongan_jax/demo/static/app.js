@@ -33,6 +33,7 @@
     three: null,          // character.js's view, null without three.js or WebGL
     char: { seq: 0, loaded: false, info: null, bytes: 0 },  // the GLB shown
     mode: "draw",         // "draw" (a drawn path, every panel) or "steer" (one walker, live)
+    clip: null,           // last /api/clip answer: an uploaded clip's recovered style
   };
 
   // ------------------------------------------------------------------------------------------
@@ -387,6 +388,72 @@
       el.textContent = e.message;
     }
   }
+
+  // ------------------------------------------------------------------------------------------
+  // Walk like this clip: a dropped BVH file's style, as a mix of the known styles, on the path
+  // ------------------------------------------------------------------------------------------
+  async function uploadClip(file) {
+    const box = $("clip-result");
+    if (!file) return;
+    box.className = "clip-result muted";
+    box.textContent = `reading ${file.name}…`;
+    try {
+      const r = await fetch("/api/clip?name=" + encodeURIComponent(file.name), {
+        method: "POST", headers: { "Content-Type": "application/octet-stream" }, body: file,
+      });
+      const res = await r.json().catch(() => ({ error: `${r.status} ${r.statusText}` }));
+      if (!r.ok) throw new Error(res.error || `${r.status} ${r.statusText}`);
+      S.clip = res;
+      showClip(res);
+      // the active panel walks the recovered mix, at the clip's speed, on the drawn path
+      const p = S.panels[S.active];
+      p.mode = "mix";
+      p.mix = Object.fromEntries(res.mix);
+      const speed = $("speed");
+      speed.value = Math.min(parseFloat(speed.max), Math.max(parseFloat(speed.min), res.speed));
+      $("speed-value").textContent = `${parseFloat(speed.value).toFixed(2)} m/s`;
+      renderStyle(); drawFloor(); changed(true);
+    } catch (e) {
+      S.clip = null;
+      box.className = "clip-result bad";
+      box.textContent = e.message;
+    }
+  }
+
+  function showClip(res) {
+    const box = $("clip-result");
+    box.className = "clip-result";
+    box.innerHTML = "";
+    const head = document.createElement("div");
+    head.className = "muted";
+    head.textContent = `${res.name}: ${res.seconds.toFixed(1)} s at ${res.speed.toFixed(2)} m/s · nearest ` +
+      res.nearest.map(([n]) => n).join(", ") + ` · found in ${(res.search_ms / 1000).toFixed(1)} s`;
+    box.appendChild(head);
+    const bars = document.createElement("div");
+    bars.className = "bars"; bars.id = "clip-mix";
+    for (const [n, w] of res.mix) {
+      const name = document.createElement("span"); name.textContent = n;
+      const track = document.createElement("span");
+      const fill = document.createElement("div"); fill.className = "bar-fill"; fill.style.width = `${100 * w}%`;
+      track.appendChild(fill);
+      const pct = document.createElement("span"); pct.className = "mono"; pct.textContent = `${Math.round(100 * w)}%`;
+      bars.append(name, track, pct);
+    }
+    box.appendChild(bars);
+  }
+
+  const drop = $("clip-drop");
+  drop.addEventListener("dragover", (ev) => { ev.preventDefault(); drop.classList.add("over"); });
+  drop.addEventListener("dragleave", () => drop.classList.remove("over"));
+  drop.addEventListener("drop", (ev) => {
+    ev.preventDefault(); drop.classList.remove("over");
+    uploadClip(ev.dataTransfer.files[0]);
+  });
+  drop.addEventListener("keydown", (ev) => {
+    if (ev.key === "Enter" || ev.key === " ") { ev.preventDefault(); ev.stopPropagation(); $("clip-file").click(); }
+  });
+  drop.addEventListener("click", (ev) => { if (!ev.target.closest("label")) $("clip-file").click(); });
+  $("clip-file").addEventListener("change", (ev) => { uploadClip(ev.target.files[0]); ev.target.value = ""; });
 
   // ------------------------------------------------------------------------------------------
   // Generate
