@@ -292,6 +292,38 @@ def test_search_finds_the_style_of_a_held_out_clip_from_any_gait_phase(shipped):
     assert np.abs(weights - weights[0]).max() < 0.2, weights
 
 
+def test_a_clip_on_another_skeleton_is_retargeted_onto_the_models(shipped, tmp_path):
+    """A held-out clip written onto the SMPL rig (other joint names, metres, no clavicles) reads back
+    through the retargeting as the model's rows: the root and the feet within 2 cm of the clip's own
+    in every frame (the retargeting's round trip, tests/test_retarget.py), and its style is found.
+    A skeleton whose legs match no built-in map is refused, naming the joints it lacks."""
+    from motiongan_jax.motion import retarget, rigs
+
+    state, meta, cfg, layout, codes = shipped
+    path = synthetic.default_dataset_dir() / "OldMan_05.bvh"
+    root, pose, fps = clips.load_motion(path, meta, cfg, layout)
+    world = np.asarray(representation.from_rows(root, pose, layout))
+    smpl = retarget.retarget(world, layout.joint_names, layout.parents, layout.rest_offsets_m,
+                             rigs.load_rig("smpl"), fps)
+    other = tmp_path / "oldman_smpl.bvh"
+    bvh.write_bvh(other, smpl.motion)
+    root2, pose2, fps2 = clips.load_motion(other, meta, cfg, layout)
+    assert fps2 == pytest.approx(fps)
+    F = min(len(root), len(root2))  # the start offset is taken from both files
+    back = np.asarray(representation.from_rows(root2, pose2, layout))
+    shift = len(root) - F
+    feet = [layout.joint_names.index(n) for n in ("LeftToeBase", "RightToeBase", "LeftFoot", "RightFoot")]
+    err = np.linalg.norm(back[-F:] - world[shift:][:F], axis=-1)
+    assert err[:, 0].max() < 0.02 and err[:, feet].max() < 0.02, (err[:, 0].max(), err[:, feet].max())
+    t = clips.model_rate_windows(root2, pose2, fps2, meta, cfg, layout, spread=search_lib.WINDOWS, phase=True)
+    assert search_lib.search_style(state, codes, meta["style_names"], t).nearest[0][0] == "OldMan"
+    renamed = tmp_path / "renamed.bvh"
+    renamed.write_text(other.read_text().replace("left_knee", "left_shin"))
+    with pytest.raises(style_space.AnalysisError, match=r"renamed\.bvh: not the model's skeleton: .* lacks .*"
+                                                         r"cannot be retargeted onto it: .*no joint for left knee"):
+        clips.load_motion(renamed, meta, cfg, layout)
+
+
 def test_search_finds_the_style_of_gs_own_walk_at_any_phase(shipped):
     """G walks a circle in a known style from two gait phases half a cycle apart; the search on its
     walk finds that style both times."""

@@ -138,8 +138,9 @@ def motion_rows(motion, source: str, cfg, layout: RowLayout, *, units_to_m: floa
         extra = [n for n in got if n not in names]
         why = "; ".join(([f"lacks {_names(missing)}"] if missing else []) + ([f"has {_names(extra)} besides"] if extra
                                                                              else [])) or "keeps them in another order"
-        raise AnalysisError(f"{source}: not the model's skeleton: of the {len(names)} joints the model moves "
-                            f"({_names(names)}) it {why}")
+        other = f"{source}: not the model's skeleton: of the {len(names)} joints the model moves ({_names(names)}) it {why}"
+        root, pose, units = retargeted_rows(motion, other, cfg, layout, units_to_m)
+        clip_layout = dataclasses.replace(layout, source_index=tuple(range(len(names))))
     if len(root) < 2:
         raise AnalysisError(f"{source}: {len(root)} frame after the first {cfg.data.start_offset}; a walk needs more")
     height = float(np.median(np.ptp(np.asarray(from_rows(root, pose, clip_layout))[..., 1], axis=1)))
@@ -149,6 +150,34 @@ def motion_rows(motion, source: str, cfg, layout: RowLayout, *, units_to_m: floa
                             f"{lo:g}-{hi:g} m: the file is in another unit than the model's data")
     check_walks(root, motion.fps, source)
     return np.asarray(root, np.float64), np.asarray(pose, np.float64), float(motion.fps)
+
+
+def retargeted_rows(motion, other: str, cfg, layout: RowLayout, units_to_m: float | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, float]:
+    """(root_Fx3, pose_FxR, units_to_m) of a motion on another skeleton, retargeted onto the model's
+    (motion.retarget, the export's retargeting run the other way: the model's skeleton as the rig,
+    the file's as the source; its units guessed from its legs unless given). AnalysisError `other`
+    (why it is not the model's skeleton) and why it cannot be retargeted, when it cannot."""
+    from motiongan_jax.motion import kinematics, retarget, rigs
+    from motiongan_jax.motion.representation import guess_units_to_m
+
+    sk = motion.skeleton
+    try:
+        units = guess_units_to_m(sk) if units_to_m is None else float(units_to_m)
+        rigs.resolve_roles(sk, None, "its skeleton")
+        if layout.rest_offsets_m is None:
+            raise rigs.RigError("the model keeps no rest pose to retarget onto")
+        model_rig = rigs.make_rig(retarget.layout_skeleton(layout.joint_names, layout.parents, layout.rest_offsets_m),
+                                  "the model's skeleton", units_to_m=1.0)
+        start = min(cfg.data.start_offset, max(motion.num_frames - 2, 0))
+        world_m = kinematics.world_positions(motion)[start:] * units
+        out = retarget.retarget(world_m, sk.names, sk.parents, np.asarray(sk.offsets, np.float64) * units, model_rig,
+                                motion.fps)
+    except (rigs.RigError, ValueError) as err:
+        raise AnalysisError(f"{other}, and it cannot be retargeted onto it: {err}") from None
+    kept = dataclasses.replace(layout, source_index=tuple(range(len(layout.joint_names))))
+    root, pose = to_rows(out.positions_m, kept)
+    return root, pose, units
 
 
 def check_walks(root_Fx3, fps: float, source: str) -> None:

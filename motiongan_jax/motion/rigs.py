@@ -60,6 +60,13 @@ NAME_MAPS: dict[str, dict[str, list[str]]] = {
             **_sided({"hip": ["LeftUpLeg"], "knee": ["LeftLeg"], "ankle": ["LeftFoot"], "toe": ["LeftToeBase"],
                       "toe_end": ["LeftToeBase_EndSite"], "shoulder": ["LeftArm"], "elbow": ["LeftForeArm"],
                       "wrist": ["LeftHand"], "hand_end": ["LeftHandIndex1"]}, _lr)},
+    # CMU's walks as converted with anatomical names (LeftHip, LeftKnee, ...; e.g. subject 131's)
+    "cmu_anatomical": {"pelvis": ["Hips"], "spine": ["lowerback"], "chest": ["Chest2", "Chest"],
+                       "neck": ["Neck", "lowerneck"], "head": ["Head"], "head_end": ["Head_EndSite"],
+                       **_sided({"hip": ["LeftHip"], "knee": ["LeftKnee"], "ankle": ["LeftAnkle"], "toe": ["LeftToe"],
+                                 "toe_end": ["LeftToe_EndSite"], "clavicle": ["LeftCollar"],
+                                 "shoulder": ["LeftShoulder"], "elbow": ["LeftElbow"], "wrist": ["LeftWrist"],
+                                 "hand_end": ["lhand", "LeftWrist_EndSite"]}, _lr)},
     "bandai": {"pelvis": ["Hips"], "spine": ["Spine"], "chest": ["Chest"], "neck": ["Neck"], "head": ["Head"],
                "head_end": ["Head_EndSite"],
                **_sided({"hip": ["UpperLeg_L"], "knee": ["LowerLeg_L"], "ankle": ["Foot_L"], "toe": ["Toes_L"],
