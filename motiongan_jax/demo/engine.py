@@ -430,7 +430,8 @@ class Engine:
         """The page's /api/clip: an uploaded BVH file's style as a mix of the known styles
         (analysis.search.search_style), its nearest styles and its speed. The file is bounded
         (MAX_CLIP_BYTES, MAX_CLIP_FRAMES, MAX_CLIP_JOINTS) and parsed in memory by the strict
-        reader; a malformed one, a skeleton that is not the model's or a motion without steps is a
+        reader; a clip on another skeleton is retargeted onto the model's (analysis.clips); a
+        malformed one, a skeleton it cannot retarget from or a motion without steps is a
         RequestError (400) naming the problem."""
         t0 = time.perf_counter()
         name = _safe_name(str(name))[:MAX_CLIP_NAME] or "clip.bvh"
@@ -468,8 +469,9 @@ class Engine:
     # -- warm-up --------------------------------------------------------------------------------
     def warm_up(self, run=None, plan=None) -> float:
         """Compiles G for every (sample bucket, batch bucket) of `plan` (default: warm_plan(), all
-        the page can ask for) not compiled yet, the style codes of every z the page can ask for and
-        the steer mode's stream window, so that no request waits for a compile; `run(fn, *args)`
+        the page can ask for) not compiled yet, the style codes of every z the page can ask for, the
+        steer mode's stream window and the style search of an uploaded clip, so that no request
+        waits for a compile; `run(fn, *args)`
         runs each (the server's generation slot). Returns seconds."""
         t0 = time.perf_counter()
         run = run or _call
