@@ -434,7 +434,8 @@ class Engine:
         malformed one, a skeleton it cannot retarget from or a motion without steps is a
         RequestError (400) naming the problem."""
         t0 = time.perf_counter()
-        name = _safe_name(str(name))[:MAX_CLIP_NAME] or "clip.bvh"
+        # the name's end is kept (its suffix is what a user recognises); only safe characters
+        name = re.sub(r"[^A-Za-z0-9._-]+", "_", str(name)).strip("_")[-MAX_CLIP_NAME:] or "clip.bvh"
         if not data:
             raise RequestError(f"{name}: empty file: expected a BVH file's text")
         if len(data) > MAX_CLIP_BYTES:
