@@ -6,8 +6,8 @@ the median of the next ones, wall clock and this process's CPU time (on a shared
 time is the steadier figure), with the load average.
 
 The model is the shipped one (or --workdir RUN / --model FILE.npz); the clip a held-out clip of
-the embedded dataset (or --clip FILE.bvh on the model's skeleton). The issue's goal: <= 10 s on
-2 cores.
+the embedded dataset (or --clip FILE.bvh, on the model's skeleton or one it retargets from). The
+goal: <= 10 s on 2 cores.
 
   JAX_PLATFORMS=cpu python -m bench.bench_search [--clip FILE.bvh] [--repeats 3] [--cache DIR]
 """
