@@ -19,7 +19,10 @@ One walker with the shipped model (or --workdir/--model) steered along a wanderi
    eased in over 0.1 s, the predicted path, a step of at least 4 samples in another thread
    whenever the buffer falls below its target, the display clock at real time), a turn key held
    from a random moment: the seconds until the shown heading (the root's direction over the last
-   8 samples) has turned 20 degrees. This is the page's delay less the browser's drawing and the network.
+   8 samples) has turned 20 degrees. This is the page's delay less the browser's drawing and the
+   network. Beside it the same delay of the input's own path drawn the instant it is made
+   (`ideal_turn_delay`: the turn rate and the heading's window alone); the difference is the latency
+   the server, the buffer and G add.
 The machine is shared: every figure is printed with the load average (bench.timing.load).
 
   JAX_PLATFORMS=cpu python -m bench.bench_stream [--steps 60] [--step 1] [--hz 30] [--turns 5]
@@ -143,6 +146,26 @@ def key_to_turn(app, rng, fps=60.0, settle_s=4.0, limit_s=4.0) -> tuple[float, f
     return delay, statistics.median(page.steps[1:])
 
 
+def ideal_turn_delay(rate: float, fps: float = 60.0) -> float:
+    """Seconds from the key going down until the input's own path, drawn the instant it is made (no
+    server, no buffer, no body), turns the shown heading (over HEADING_SPAN samples) by TURNED_DEG:
+    what the turn rate, its easing and the heading's window take. The rest of key_to_turn's delay
+    is the system's latency."""
+    omega = psi = 0.0
+    path = [np.zeros(2)] * (HEADING_SPAN + 1)
+    t, next_sample = 0.0, 0.0
+    while True:
+        t += 1 / fps
+        omega += (TURN_RATE - omega) * min(1.0, (1 / fps) / TURN_EASE_S)
+        psi += omega / fps
+        while next_sample <= t:
+            path.append(path[-1] + np.array([math.cos(psi), math.sin(psi)]) / rate)
+            next_sample += 1 / rate
+        d = path[-1] - path[-1 - HEADING_SPAN]
+        if math.degrees(abs(math.atan2(d[1], d[0]))) >= TURNED_DEG:
+            return t
+
+
 def hold(app, n: int, hz: float, seconds: float) -> tuple[float, float]:
     """n page loops at once in real time, frames at hz: (the largest share of time a walker's
     display clock waited for samples, steps served per second)."""
@@ -245,9 +268,12 @@ def main() -> None:
         d, s = key_to_turn(app, rng)
         delays.append(d)
         steps.append(s)
+    ideal = ideal_turn_delay(rate)
     print(f"key to a {TURNED_DEG:g}-degree turn of the shown heading: median {statistics.median(delays):.2f} s "
           f"(trials {', '.join(f'{d:.2f}' for d in delays)}; median step round trip "
-          f"{1e3 * statistics.median(steps):.0f} ms)")
+          f"{1e3 * statistics.median(steps):.0f} ms); the input's own path drawn at once takes {ideal:.2f} s "
+          f"(the turn rate, eased, over the heading's {HEADING_SPAN} samples): latency "
+          f"{statistics.median(delays) - ideal:.2f} s")
     print(f"state after {wk.emitted} samples: {wk.state_size()} numbers; {load()}")
 
 
