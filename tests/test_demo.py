@@ -480,6 +480,61 @@ def test_steer_streams_what_a_walker_fed_the_same_path_makes(steer_app, engine):
     assert client.get("/api/steer").get_json()["walkers"] == 0
 
 
+def test_steer_rotations_pose_the_pages_character_at_the_streamed_joints(steer_app, engine):
+    """With "rotations", each streamed sample comes with local joint rotations on the skeleton of
+    the page's GLB (its nodes, by name and order): the GLB's rest offsets turned by them (forward
+    kinematics written here, with scipy's quaternions) put the root where the step says and point
+    every bone that is its parent's only child along the streamed bone (the export's rule; this
+    test's random G does not keep bone lengths, so positions further out differ by them)."""
+    import pygltflib
+    from scipy.spatial.transform import Rotation
+
+    client, _, _ = steer_app
+    st = _post(client, "/api/steer/start", {"style": "Sad", "speed": SPEED, "rotations": True}).get_json()
+    glb = client.post("/api/export", json={"points": [[0.0, 0.0], [3.0, 0.0]], "styles": ["Sad"], "format": "glb"})
+    assert glb.status_code == 200
+    gl = pygltflib.GLTF2.load_from_bytes(glb.data)
+    skin = gl.skins[0]
+    names = [gl.nodes[j].name for j in skin.joints]
+    assert st["joints"] == names
+    parent = {c: j for j in skin.joints for c in (gl.nodes[j].children or [])}
+    offsets = np.array([gl.nodes[j].translation or [0.0, 0.0, 0.0] for j in skin.joints])
+    n = 6
+    r = _post(client, "/api/steer/step", {"session": st["session"], "from": st["next"], "samples": n,
+                                          "ahead": _ahead(st["last_point"], 0.0, st["lookahead"] + n,
+                                                          turn=0.1).tolist()}).get_json()
+    q = np.array(r["rotations"])
+    chex.assert_shape(q, (n, len(names), 4))
+    np.testing.assert_allclose(np.linalg.norm(q, axis=-1), 1.0, atol=1e-4)
+    pos = np.array(r["positions"])
+    index = {j: k for k, j in enumerate(skin.joints)}
+    lay = engine.layout
+    only = [i for i, p in enumerate(lay.parents) if p >= 0 and list(lay.parents).count(p) == 1]
+    assert len(only) >= 10
+    unit = lambda v: v / np.linalg.norm(v)  # noqa: E731
+    for t in range(n):
+        world_R, world_p = {}, {}
+        for k, j in enumerate(skin.joints):  # parents first (the export skeleton's order)
+            R = Rotation.from_quat(q[t, k]).as_matrix()
+            if j in parent:
+                pk = index[parent[j]]
+                world_p[k] = world_p[pk] + world_R[pk] @ offsets[k]
+                world_R[k] = world_R[pk] @ R
+            else:
+                world_p[k], world_R[k] = pos[t, 0], R
+        for i in only:
+            k, pk = names.index(lay.joint_names[i]), names.index(lay.joint_names[lay.parents[i]])
+            np.testing.assert_allclose(unit(world_p[k] - world_p[pk]), unit(pos[t, i] - pos[t, lay.parents[i]]),
+                                       atol=2e-2, err_msg=lay.joint_names[i])  # 1e-4 m rounding, short bones
+    plain = _post(client, "/api/steer/start", {"style": "Sad"}).get_json()
+    assert "joints" not in plain
+    r2 = _post(client, "/api/steer/step", {"session": plain["session"], "from": 1, "samples": 1,
+                                           "ahead": _ahead(plain["last_point"], 0.0, plain["lookahead"] + 1).tolist()})
+    assert "rotations" not in r2.get_json()
+    bad = _post(client, "/api/steer/start", {"style": "Sad", "rotations": "yes"})
+    assert bad.status_code == 400 and "'rotations' must be true or false" in bad.get_json()["error"]
+
+
 def test_steer_style_change_blends_over_a_second(steer_app, engine):
     client, _, _ = steer_app
     st = _post(client, "/api/steer/start", {"style": "Normal"}).get_json()

@@ -36,7 +36,7 @@ from motiongan_jax.analysis import style_space
 from motiongan_jax.data import curves
 from motiongan_jax.generate import limits, stream, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
-from motiongan_jax.motion import bvh, rigs
+from motiongan_jax.motion import bvh, ik, rigs
 
 # Limits the server enforces on every request (each breach is a 400 naming it): an interactive
 # page's, inside generate.py's MAX_* limits, which every entry point applies (so here too)
@@ -306,6 +306,23 @@ class Engine:
         speed = user_curves.DEFAULT_SPEED_M_PER_S if speed is None else speed
         return stream.Walker(self.state, self.layout, w, self.rate, start_xz=start_xz, heading_xz=heading_xz,
                              speed_m_per_s=speed)
+
+    def export_joint_names(self) -> tuple[str, ...]:
+        """The joints of the skeleton the page's GLB carries (the export's, ik.export_skeleton with
+        the writers' defaults), in the order of local_quaternions."""
+        ex = ik.export_skeleton(self.layout.joint_names, self.layout.parents, writers.rest_offsets(self.layout))
+        return tuple(ex.skeleton.names)
+
+    def local_quaternions(self, positions_TxJx3) -> np.ndarray:
+        """(T, Je, 4) local joint rotations [x, y, z, w] (glTF's order) on export_joint_names'
+        skeleton whose forward kinematics give `positions_TxJx3` (ik.solve_rotations, as the GLB's
+        animation has them): a streamed walk posed on the page's character."""
+        from scipy.spatial.transform import Rotation
+
+        _, local, _ = ik.solve_rotations(np.asarray(positions_TxJx3, np.float64), self.layout.joint_names,
+                                         self.layout.parents, writers.rest_offsets(self.layout))
+        T, Je = local.shape[:2]
+        return Rotation.from_matrix(local.reshape(-1, 3, 3)).as_quat().reshape(T, Je, 4)
 
     def _warm_walker(self) -> None:
         w, _ = self.style_code(self.style_names[0])

@@ -60,6 +60,7 @@ class Session:
     walker: stream.Walker
     style: str
     seen: float  # the clock at its last request
+    rotations: bool = False  # each step also gives the joints' local rotations (the page's character)
     lock: threading.Lock = dataclasses.field(default_factory=threading.Lock)
 
 
@@ -135,8 +136,14 @@ class Steering:
             s.lock.release()
 
     def start(self, body) -> dict:
-        """A new walker: {"style", "z", "seed", "start": [x, z], "heading": [x, z], "speed"}."""
-        data = _fields(body, {"style", "z", "seed", "start", "heading", "speed"}, {"style"})
+        """A new walker: {"style", "z", "seed", "start": [x, z], "heading": [x, z], "speed",
+        "rotations": false}; with "rotations" every step also gives each sample's local joint
+        rotations on the export skeleton whose joint names the answer lists ("joints"): what poses
+        the character of the page's GLB."""
+        data = _fields(body, {"style", "z", "seed", "start", "heading", "speed", "rotations"}, {"style"})
+        rotations = data.get("rotations", False)
+        if not isinstance(rotations, bool):
+            raise RequestError(f"'rotations' must be true or false, got {str(rotations)[:40]!r}")
         w, text = self.engine.style_code(data["style"], data.get("z", "zero"), data.get("seed", 0))
         start = _xz(data.get("start", [0.0, 0.0]), "'start'")
         heading = _xz(data.get("heading", [1.0, 0.0]), "'heading'")
@@ -156,8 +163,9 @@ class Steering:
                 raise SteerError(503, f"the server steers at most {self.max_walkers} walkers at once and all are "
                                       f"in use; one is freed when its tab stops or is idle for {self.idle_s:g} s",
                                  retry_after_s=self.idle_s)
-            self._sessions[sid] = Session(wk, text, self.clock())
-        return {"session": sid, "fps": self.engine.rate, "style": text, "next": 1,
+            self._sessions[sid] = Session(wk, text, self.clock(), rotations=rotations)
+        joints = {"joints": list(self.engine.export_joint_names())} if rotations else {}
+        return {**joints, "session": sid, "fps": self.engine.rate, "style": text, "next": 1,
                 "last_point": np.round(start, DIGITS).tolist(), "lookahead": wk.lookahead,
                 "max_samples": MAX_POLL_SAMPLES, "max_ahead": MAX_AHEAD_POINTS, "blend_s": BLEND_S,
                 "idle_s": self.idle_s, "max_speed": MAX_SPEED_M_PER_S}
@@ -199,7 +207,9 @@ class Steering:
                 self._slots.release()
             s.seen = self.clock()
             nxt = max(wk.emitted, 1)
-            return {"index0": out.index0, "positions": np.round(out.positions, DIGITS).tolist(),
+            rot = ({"rotations": np.round(self.engine.local_quaternions(out.positions), 5).tolist()}
+                   if s.rotations else {})
+            return {**rot, "index0": out.index0, "positions": np.round(out.positions, DIGITS).tolist(),
                     "curve": np.round(out.curve[:, [0, 2]], DIGITS).tolist(),
                     "blend": [round(wk.style_progress(t), 4) for t in range(out.index0, out.index0 + len(out.curve))],
                     "style": s.style, "next": nxt, "last_point": np.round(wk.path_point(nxt - 1), DIGITS).tolist(),

@@ -539,6 +539,26 @@
         `once (${about}); warmed up ${ready} of ${total}`);
   }
 
+  // the steered walker's character: the model's body from a GLB of a short walk (its animation
+  // unused), posed live from each step's rotations; the rig picker applies to downloads only
+  async function loadSteerCharacter() {
+    if (!S.three || !ST.joints) return;
+    const seq = ++ST.char.seq;
+    ST.char.loaded = false;
+    try {
+      const body = { points: [[0, 0], [2, 0]], styles: [ST.style], z: "zero", seed: 0, format: "glb" };
+      const buf = await (await api("/api/export", body)).arrayBuffer();
+      if (seq !== ST.char.seq) return;
+      await S.three.loadPosed(buf, ST.joints);
+      S.char.seq++; S.char.loaded = false;  // the view now holds the steered walker, not the drawn walks
+      if (seq !== ST.char.seq) return;
+      ST.char.loaded = true;
+      S.three.setPath(ST.curve.concat(ST.ahead));
+    } catch (e) {
+      if (seq === ST.char.seq) showError("character: " + e.message);
+    }
+  }
+
   // the character: the GLB of the same request (every motion, one animation each, on the chosen rig)
   async function loadCharacter() {
     if (!S.three || !S.request) return;
@@ -551,6 +571,7 @@
       if (seq !== S.char.seq) return;
       S.three.setPath(S.result.curve);
       const info = await S.three.load(buf);
+      ST.char.seq++; ST.char.loaded = false;  // the view now holds these walks, not the steered one
       if (seq !== S.char.seq) return;
       S.char = { seq, loaded: true, info, bytes: buf.byteLength };
     } catch (e) {
@@ -841,8 +862,12 @@
     const ms = steer ? [steerMotion()] : res ? res.motions : [null];
     const n = ms.length, cols = n <= 3 ? n : Math.ceil(n / 2), rows = Math.ceil(n / cols);
     const cw = w / cols, ch = h / rows;
-    // the steered walker is drawn as a stick figure (the character plays a whole downloaded animation)
-    const character = !steer && S.look === "character" && S.three && S.char.loaded && res && S.three.count === n ? [] : null;
+    // the steered walker's character is posed sample by sample (character.js's pose); in draw mode
+    // it plays the downloaded animation
+    const steerChar = steer && S.look === "character" && S.three && ST.char.loaded && ST.samples.length > 0 &&
+      ST.rots.length === ST.samples.length;
+    const character = steerChar || (!steer && S.look === "character" && S.three && S.char.loaded && res &&
+      S.three.count === n) ? [] : null;
     g.clearRect(0, 0, w, h);
     for (let i = 0; i < n; i++) {
       const cx = (i % cols) * cw, cy = Math.floor(i / cols) * ch;
@@ -857,7 +882,11 @@
     v3.style.display = character ? "block" : "none";
     if (character) {
       Object.assign(v3.style, { left: view.offsetLeft + "px", top: view.offsetTop + "px", width: w + "px", height: h + "px" });
-      S.three.render(character, f / res.fps, w, h, dpr);
+      if (steer) {
+        const i = Math.floor(f), j = Math.min(i + 1, ST.rots.length - 1);
+        S.three.pose(ST.rots[i], ST.rots[j], f - i, ST.samples[i][0], ST.samples[j][0]);
+      }
+      S.three.render(character, steer ? 0 : f / res.fps, w, h, dpr);
     }
     if (res) {
       $("scrub").value = String(Math.floor(f));
@@ -933,6 +962,9 @@
     rtt: 0.15, serverMs: 0, stalls: 0, walked: 0, style: "", blend: 1,
     record: null,                        // tests: every step's answer
     cam: null,
+    rots: [],                            // the kept samples' local joint rotations (the character), with samples
+    joints: null,                        // their joints' names (the GLB's), from the start's answer
+    char: { seq: 0, loaded: false },     // the character posed live: the GLB's body, its joints turned by rots
   };
   const emitted = () => ST.base + ST.samples.length;
   const clamp = (v, lo, hi) => Math.max(lo, Math.min(hi, v));
@@ -999,12 +1031,17 @@
           const c = r.curve[i], prev = ST.curve[ST.curve.length - 1];
           if (prev) ST.walked += Math.hypot(c[0] - prev[0], c[1] - prev[1]);
           ST.samples.push(r.positions[i]); ST.curve.push(c);
+          if (r.rotations) ST.rots.push(r.rotations[i]);
         }
         const drop = ST.samples.length - KEEP;
-        if (drop > 0) { ST.samples.splice(0, drop); ST.curve.splice(0, drop); ST.base += drop; }
+        if (drop > 0) {
+          ST.samples.splice(0, drop); ST.curve.splice(0, drop); ST.base += drop;
+          ST.rots.splice(0, ST.rots.length - ST.samples.length);
+        }
         const used = r.next - from;  // predicted points now walked
         if (used > 0) ST.psi = psis[used - 1];
         ST.next = r.next; ST.lastPoint = r.last_point; ST.ahead = pts.slice(Math.max(0, used));
+        if (ST.char.loaded) S.three.setPath(ST.curve.concat(ST.ahead));
         ST.style = r.style; ST.blend = r.blend[r.blend.length - 1];
         ST.serverMs = r.server_ms.total;
         // the first step compiles (once per server): not a round trip to plan by
@@ -1064,10 +1101,13 @@
     try {
       const r = await (await api("/api/steer/start", {
         style, z, seed, start: ST.lastPoint, heading: [Math.cos(ST.psi), Math.sin(ST.psi)], speed: ST.speed,
+        rotations: !!S.three,
       })).json();
       Object.assign(ST, { session: r.session, fps: r.fps, lookahead: r.lookahead, maxSamples: r.max_samples,
                           next: r.next, lastPoint: r.last_point, samples: [], curve: [], ahead: [], base: 0,
-                          clock: 0, style: r.style, blend: 1, styleKey: `${style}|${z}|${seed}`, retryAt: 0 });
+                          clock: 0, style: r.style, blend: 1, styleKey: `${style}|${z}|${seed}`, retryAt: 0,
+                          rots: [], joints: r.joints || null });
+      if (ST.joints && !ST.char.loaded) loadSteerCharacter();
       showError(null); setStatus("");
       $("hint").hidden = true;
     } catch (e) {
@@ -1156,6 +1196,7 @@
       ST.speed = parseFloat($("speed").value);
     } else {
       stopSteer();
+      if (S.result && !S.char.loaded) loadCharacter();  // the view held the steered walker
       $("hint").textContent = HINT;
       $("hint").hidden = !!S.result;
       fitFloor(S.result ? S.result.curve : pathPoints());

@@ -61,6 +61,35 @@ export function createView(canvas) {
     return { animations: instances.map((i) => i.clip), meshes: instances.reduce((a, i) => a + i.meshes, 0) };
   }
 
+  // the steered walker: the GLB's body without its animation, its joints (`names`, the server's
+  // "joints") turned each frame by pose(); returns what load() does
+  async function loadPosed(buffer, names) {
+    const gltf = await loader.parseAsync(buffer, "");
+    for (const it of instances) scene.remove(it.root);
+    const root = gltf.scene;
+    let meshes = 0;
+    root.traverse((o) => { if (o.isMesh) { o.castShadow = true; o.frustumCulled = false; meshes++; } });
+    // the loader's node names: three's PropertyBinding.sanitizeNodeName
+    const bones = names.map((n) => root.getObjectByName(THREE.PropertyBinding.sanitizeNodeName(n)) || null);
+    const missing = names.filter((n, i) => !bones[i]);
+    if (missing.length) throw new Error(`the GLB has no joint ${missing.slice(0, 3).join(", ")}`);
+    scene.add(root);
+    instances = [{ root, mixer: null, meshes, clip: "steer", bones }];
+    return { animations: [], meshes };
+  }
+
+  // rotations qa, qb ([x, y, z, w] per joint, local) and roots ra, rb of two samples, blended at a
+  const qA = new THREE.Quaternion(), qB = new THREE.Quaternion();
+  function pose(qa, qb, a, ra, rb) {
+    const it = instances[0];
+    if (!it || !it.bones) return;
+    it.bones.forEach((bone, j) => {
+      qA.fromArray(qa[j]); qB.fromArray(qb[j]);
+      bone.quaternion.slerpQuaternions(qA, qB, a);
+    });
+    it.bones[0].position.set(ra[0] + a * (rb[0] - ra[0]), ra[1] + a * (rb[1] - ra[1]), ra[2] + a * (rb[2] - ra[2]));
+  }
+
   // panels: [{x, y, w, h, index, eye: [x, y, z], target: [x, y, z]}] in CSS pixels of the canvas
   function render(panels, time, width, height, dpr) {
     renderer.setPixelRatio(dpr);
@@ -70,7 +99,7 @@ export function createView(canvas) {
     for (const p of panels) {
       instances.forEach((it, i) => { it.root.visible = i === p.index; });
       const it = instances[p.index];
-      if (it) it.mixer.setTime(time);
+      if (it && it.mixer) it.mixer.setTime(time);
       const [tx, ty, tz] = p.target;
       sun.position.set(tx + 2.5, 6, tz + 1.5);
       sun.target.position.set(tx, 0, tz);
@@ -85,5 +114,5 @@ export function createView(canvas) {
     }
   }
 
-  return { load, render, setPath, get count() { return instances.length; } };
+  return { load, loadPosed, pose, render, setPath, get count() { return instances.length; } };
 }
