@@ -383,7 +383,7 @@ def test_chunks_walk_one_gait_clock_and_stay_close_to_one_pass(gait_model, monke
     ref = walk.generate_motion(state, layout, full, w, phi0)
     calls, progress = [], []
     monkeypatch.setattr(model_apply, "g_apply",
-                        lambda st, v, ww, ph: (calls.append((v, ww, ph)), real(st, v, ww, ph))[1])
+                        lambda st, v, ww, ph, at=None: (calls.append((v, ww, ph)), real(st, v, ww, ph, at))[1])
     one = walk.generate_motion(state, layout, full[:M], w, phi0)
     assert [c[0].shape for c in calls] == [(2, 1536, 3)]
     calls.clear()
@@ -434,7 +434,7 @@ def test_motions_are_generated_in_groups_that_fit_batch_samples(run, monkeypatch
     state, meta, cfg, layout = run
     calls = []
 
-    def fake_g(st, v, w, phase):
+    def fake_g(st, v, w, phase, phase_BxT=None):
         calls.append(v.shape)
         root = v * w[:, :1, None]
         pose = jax.numpy.broadcast_to(jax.numpy.cumsum(v[..., :1], axis=1) + w[:, None, 1:2],

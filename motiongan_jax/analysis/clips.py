@@ -136,9 +136,10 @@ def motion_rows(motion, source: str, cfg, layout: RowLayout, *, units_to_m: floa
     if got != names:
         missing = [n for n in names if n not in got]
         extra = [n for n in got if n not in names]
-        why = "; ".join(([f"lacks {_names(missing)}"] if missing else []) + ([f"has {_names(extra)} besides"] if extra
-                                                                             else [])) or "keeps them in another order"
-        other = f"{source}: not the model's skeleton: of the {len(names)} joints the model moves ({_names(names)}) it {why}"
+        why = "; ".join(([f"lacks {_names(missing)}"] if missing else [])
+                        + ([f"has {_names(extra)} besides"] if extra else [])) or "keeps them in another order"
+        other = (f"{source}: not the model's skeleton: of the {len(names)} joints the model moves "
+                 f"({_names(names)}) it {why}")
         root, pose, units = retargeted_rows(motion, other, cfg, layout, units_to_m)
         clip_layout = dataclasses.replace(layout, source_index=tuple(range(len(names))))
     if len(root) < 2:

@@ -69,8 +69,9 @@ def own_walk(state, layout, clip, cfg, w_D, phase_offset: float) -> tuple[np.nda
                            mode="nearest")
     curve = trajectory.on_floor(curves.resample_polyline(xz, num_points=n)).astype(np.float32)
     bucket = next((b for b in WALK_BUCKETS if b >= n), n)
+    offset = np.asarray([phase_offset], np.float32) if model_apply.has_gait_phase(state) else None
     gen = walk.generate_motion(state, layout, walk.extend_straight(curve, bucket - n),
-                               np.asarray(w_D, np.float32)[None], np.asarray([phase_offset], np.float32))
+                               np.asarray(w_D, np.float32)[None], offset)
     pos = gen.positions[0, :n]
     root = pos[:, 0]
     return root, (pos[:, 1:] - root[:, None]).reshape(n, -1)
