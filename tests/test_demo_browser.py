@@ -53,7 +53,9 @@ def playwright_api():
 @pytest.fixture(scope="module")
 def demo_server():
     """`python -m motiongan_jax.demo --port 0`: (the URL it prints, its process); stopped afterwards."""
-    proc = subprocess.Popen([sys.executable, "-m", "motiongan_jax.demo", "--port", "0", "--no-warm-up"],
+    # the tests' unoptimised XLA (conftest.FAST) runs G's steps slowly: a clip's search takes 3
+    proc = subprocess.Popen([sys.executable, "-m", "motiongan_jax.demo", "--port", "0", "--no-warm-up",
+                             "--search-steps", "3"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     url, lines, deadline = None, [], time.monotonic() + 180
     try:

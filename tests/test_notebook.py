@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "style_space.ipynb"
-PARAMS = dict(CURVE_LENGTH_M=1.4, SEARCH_STEPS=8)
+PARAMS = dict(CURVE_LENGTH_M=1.4, SEARCH_STEPS=3)
 
 
 def _notebook() -> dict:

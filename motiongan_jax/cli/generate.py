@@ -77,6 +77,8 @@ def main(argv=None) -> int:
     ap.add_argument("--style", default=None)
     ap.add_argument("--style-from", default=None, metavar="CLIP",
                     help="a BVH clip (or .npz of world positions): walk in its recovered style")
+    ap.add_argument("--search-steps", type=int, default=None, metavar="N",
+                    help="with --style-from: Adam steps of the style search (default 30; fewer: faster, rougher)")
     ap.add_argument("--curve", default=None)
     ap.add_argument("--out", default=None)
     ap.add_argument("--length", type=float, default=None, help="shape curves: arc length in metres")
@@ -122,6 +124,8 @@ def main(argv=None) -> int:
             print("\n".join(pretrained.model_meta(args.workdir, args.step, args.model)["style_names"]))
             return 0
         missing = [f"--{n}" for n in ("curve", "out") if getattr(args, n) is None]
+        if args.search_steps is not None and (args.style_from is None or not 1 <= args.search_steps <= 1000):
+            ap.error("--search-steps goes with --style-from and must be 1..1000")
         if args.style_from is not None and (args.style is not None or args.figure):
             ap.error("--style-from gives the style: use it without --style and --figure")
         if args.style is None and args.style_from is None and args.figure != "styles":
@@ -140,7 +144,7 @@ def main(argv=None) -> int:
         names = list(meta["style_names"])
         speed = args.speed
         if args.style_from is not None:
-            found, clip_speed = _style_from(args.style_from, state, meta, cfg, layout)
+            found, clip_speed = _style_from(args.style_from, state, meta, cfg, layout, args.search_steps)
             args.style = found.mix_text()
             near = ", ".join(f"{n} ({d:.3g})" for n, d in found.nearest[:3])
             _log(f"style of {args.style_from}: {args.style} (nearest known styles: {near}; "
@@ -174,7 +178,7 @@ def main(argv=None) -> int:
     return 0
 
 
-def _style_from(path, state, meta, cfg, layout):
+def _style_from(path, state, meta, cfg, layout, steps=None):
     """(analysis.search.StyleFound, the clip's speed in m/s) of a clip file."""
     from motiongan_jax.analysis import clips, search, style_space
     from motiongan_jax.generate import walk
@@ -183,5 +187,5 @@ def _style_from(path, state, meta, cfg, layout):
     target = clips.model_rate_windows(root, pose, fps, meta, cfg, layout, spread=search.WINDOWS, phase=True,
                                       source=str(path))
     codes = style_space.label_codes(state, meta["style_names"], k=1).zero_CxD
-    found = search.search_style(state, codes, meta["style_names"], target)
+    found = search.search_style(state, codes, meta["style_names"], target, steps=steps or search.STEPS)
     return found, target.spacing_m * walk.sample_rate(meta, cfg)

@@ -226,6 +226,7 @@ class Engine:
         self._codes: collections.OrderedDict = collections.OrderedDict()
         self._codes_lock = threading.Lock()
         self._zero: np.ndarray | None = None  # the known styles' codes at z = 0 (clip_style)
+        self.search_steps = search_lib.STEPS  # an uploaded clip's style search (motiongan-demo --search-steps)
 
     # -- model facts for the page ---------------------------------------------------------------
     def info(self) -> dict:
@@ -464,7 +465,8 @@ class Engine:
             root, pose, fps = clips_lib.motion_rows(motion, name, self.cfg, self.layout)
             target = clips_lib.model_rate_windows(root, pose, fps, self.meta, self.cfg, self.layout,
                                                   spread=search_lib.WINDOWS, phase=True, source=name)
-            found = search_lib.search_style(self.state, self._zero_codes(), self.style_names, target)
+            found = search_lib.search_style(self.state, self._zero_codes(), self.style_names, target,
+                                            steps=self.search_steps)
         except (bvh.BVHError, style_space.AnalysisError) as err:
             raise RequestError(str(err)) from None
         speed = target.spacing_m * self.rate
@@ -521,7 +523,7 @@ class Engine:
         pose = (gen.positions[0, :, 1:] - root[:, None]).reshape(len(root), -1)
         target = clips_lib.model_rate_windows(root, pose, self.rate, self.meta, self.cfg, self.layout,
                                               spread=search_lib.WINDOWS, phase=True, source="warm-up")
-        search_lib.search_style(self.state, self._zero_codes(), self.style_names, target)
+        search_lib.search_style(self.state, self._zero_codes(), self.style_names, target, steps=self.search_steps)
 
 
 def warm_plan() -> list[tuple[int, int]]:

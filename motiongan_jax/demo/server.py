@@ -257,11 +257,16 @@ def main(argv=None) -> int:
                     help="address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every network)")
     ap.add_argument("--port", type=int, default=8000, help="port (default 8000; 0: any free port)")
     ap.add_argument("--no-warm-up", action="store_true", help="compile G on first use instead of at start")
+    ap.add_argument("--search-steps", type=int, default=None,
+                    help="Adam steps of an uploaded clip's style search (default analysis.search.STEPS, 30; "
+                         "fewer: a faster, rougher answer)")
     ap.add_argument("--debug", action="store_true",
                     help="serve through Flask's development server (this machine only) instead of waitress")
     args = ap.parse_args(argv)
     if not 0 <= args.port <= 65535:
         ap.error(f"--port must be 0..65535, got {args.port}")
+    if args.search_steps is not None and not 1 <= args.search_steps <= 1000:
+        ap.error(f"--search-steps must be 1..1000, got {args.search_steps}")
     if args.debug and args.host not in LOOPBACK:
         ap.error(f"--debug serves through Flask's development server, which is for this machine only: "
                  f"use --host 127.0.0.1, not {args.host}")
@@ -274,6 +279,8 @@ def main(argv=None) -> int:
     except CheckpointError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if args.search_steps is not None:
+        engine.search_steps = args.search_steps
     try:
         app = create_app(engine)
         server = make_server(app, args.host, args.port, args.debug)
