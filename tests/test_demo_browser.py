@@ -11,6 +11,7 @@ Without chromium or Playwright it fails under CI (which installs both, see .ci/r
 elsewhere, saying what to install.
 """
 
+import math
 import os
 import re
 import shutil
@@ -278,61 +279,6 @@ def _drop_file(page, selector: str, name: str, data: bytes) -> None:
     }""", [selector, name, list(data)])
 
 
-def test_drop_a_clip_see_its_style_as_a_mix_and_walk_it(playwright_api, demo_url, tmp_path):
-    """Walk like this clip: a held-out clip of the embedded dataset dropped on the page shows its
-    recovered style as a mix of the known styles (the server's answer, drawn as bars), and the
-    active panel walks that mix on the drawn path at the clip's speed. A bad file gets the
-    server's message on the page, and the walk stays as it was."""
-    from motiongan_jax.data import synthetic
-
-    names = pretrained.read_export(pretrained.SHIPPED_MODEL).meta["style_names"]
-    clip = synthetic.default_dataset_dir() / "OldMan_05.bvh"  # held out: trial 5 of 5
-    with playwright_api() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1280, "height": 860})
-            errors = []
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(demo_url)
-            page.wait_for_selector("#mode-label .chip")
-            page.locator("#presets button", has_text="Circle").click()
-            page.wait_for_function("window.demo.state.strokes.length === 1")
-            _wait_generated(page, 0)  # the circle, walked in the first style
-            with page.expect_response("**/api/clip?name=OldMan_05.bvh", timeout=300_000) as answer:
-                _drop_file(page, "#clip-drop", clip.name, clip.read_bytes())
-            assert answer.value.status == 200, answer.value.text()
-            res = answer.value.json()
-            page.wait_for_selector("#clip-mix")
-            shown = page.locator("#clip-mix span").all_inner_texts()
-            assert shown[0::3] == [n for n, _ in res["mix"]] and set(shown[0::3]) <= set(names)
-            assert shown[2::3] == [f"{round(100 * a)}%" for _, a in res["mix"]]
-            assert res["nearest"][0][0] == "OldMan", res  # the shipped model knows this style
-            head = page.locator("#clip-result .muted").inner_text()
-            assert head.startswith(f"OldMan_05.bvh: {res['seconds']:.1f} s at {res['speed']:.2f} m/s · nearest OldMan")
-            # the active panel now walks the mix, at the clip's speed, on the circle
-            want = ",".join(f"{n}:{a:g}" for n, a in res["mix"] if a > 0)
-            assert page.locator("#style-string").inner_text() == f"style: {want}"
-            assert page.locator("#speed-value").inner_text() == f"{res['speed']:.2f} m/s"
-            page.wait_for_function(f"window.demo.state.result && !window.demo.state.inflight && "
-                                   f"window.demo.state.result.motions[0].title === {want!r}", timeout=300_000)
-            assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
-
-            # a file on another skeleton, chosen with the file input: the server's 400, on the page
-            bad = tmp_path / "other.bvh"
-            bad.write_text(clip.read_text().replace("JOINT LeftUpLeg", "JOINT LeftThigh"))
-            page.set_input_files("#clip-file", str(bad))
-            page.wait_for_function("document.getElementById('clip-result').classList.contains('bad')")
-            msg = page.locator("#clip-result").inner_text()
-            assert msg.startswith("other.bvh: not the model's skeleton") and "LeftThigh" in msg, msg
-            assert page.evaluate("window.demo.state.result.motions[0].title") == want
-            assert not errors, errors
-        finally:
-            browser.close()
-
-
-CONTROLS = "button, select, input, canvas, #status, #time, #path-length, #style-string, #expr-check, #model-info"
-
-
 def _boxes(page) -> list[dict]:
     """The page boxes of every visible control and text line (hidden ones have none)."""
     return page.evaluate(f"""() => [...document.querySelectorAll({CONTROLS!r})].map((e) => {{
@@ -410,6 +356,62 @@ STEER_STYLE_AT = 30.0  # Normal, then OldMan
 TURN_RATE = 1.2  # rad/s with a turn key held (app.js), positive to the right: the floor angle atan2(z, x) grows
 MAX_TURN_DELAY_S = 1.5  # key down to a visible turn of 20 degrees, stated in the README
 HEADING_SPAN = 8  # samples over which the shown heading is the root's direction of travel (0.53 s)
+
+
+def test_drop_a_clip_see_its_style_as_a_mix_and_walk_it(playwright_api, demo_url, tmp_path):
+    """Walk like this clip: a held-out clip of the embedded dataset dropped on the page shows its
+    recovered style as a mix of the known styles (the server's answer, drawn as bars), and the
+    active panel walks that mix on the drawn path at the clip's speed. A bad file gets the
+    server's message on the page, and the walk stays as it was."""
+    from motiongan_jax.data import synthetic
+
+    names = pretrained.read_export(pretrained.SHIPPED_MODEL).meta["style_names"]
+    clip = synthetic.default_dataset_dir() / "OldMan_05.bvh"  # held out: trial 5 of 5
+    with playwright_api() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 860})
+            errors = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(demo_url)
+            page.wait_for_selector("#mode-label .chip")
+            page.locator("#presets button", has_text="Circle").click()
+            page.wait_for_function("window.demo.state.strokes.length === 1")
+            _wait_generated(page, 0)  # the circle, walked in the first style
+            with page.expect_response("**/api/clip?name=OldMan_05.bvh", timeout=300_000) as answer:
+                _drop_file(page, "#clip-drop", clip.name, clip.read_bytes())
+            assert answer.value.status == 200, answer.value.text()
+            res = answer.value.json()
+            page.wait_for_selector("#clip-mix")
+            shown = page.locator("#clip-mix span").all_inner_texts()
+            assert shown[0::3] == [n for n, _ in res["mix"]] and set(shown[0::3]) <= set(names)
+            assert shown[2::3] == [f"{math.floor(100 * a + 0.5)}%" for _, a in res["mix"]]  # JS's Math.round
+            assert res["nearest"][0][0] == "OldMan", res  # the shipped model knows this style
+            head = page.locator("#clip-result .muted").inner_text()
+            assert head.startswith(f"OldMan_05.bvh: {res['seconds']:.1f} s at {res['speed']:.2f} m/s · nearest OldMan")
+            # the active panel now walks the mix, at the clip's speed, on the circle
+            want = ",".join(f"{n}:{a:g}" for n, a in res["mix"] if a > 0)
+            assert page.locator("#style-string").inner_text() == f"style: {want}"
+            shown_speed = float(page.locator("#speed-value").inner_text().split()[0])
+            assert abs(shown_speed - res["speed"]) <= 0.025 + 1e-6  # the clip's, on the slider's 0.05 m/s steps
+            page.wait_for_function(f"window.demo.state.result && !window.demo.state.inflight && "
+                                   f"window.demo.state.result.motions[0].title === {want!r}", timeout=300_000)
+            assert page.locator("#error").is_hidden(), page.locator("#error").inner_text()
+
+            # a file on another skeleton, chosen with the file input: the server's 400, on the page
+            bad = tmp_path / "other.bvh"
+            bad.write_text(clip.read_text().replace("JOINT LeftUpLeg", "JOINT LeftThigh"))
+            page.set_input_files("#clip-file", str(bad))
+            page.wait_for_function("document.getElementById('clip-result').classList.contains('bad')")
+            msg = page.locator("#clip-result").inner_text()
+            assert msg.startswith("other.bvh: not the model's skeleton") and "LeftThigh" in msg, msg
+            assert page.evaluate("window.demo.state.result.motions[0].title") == want
+            assert not errors, errors
+        finally:
+            browser.close()
+
+
+CONTROLS = "button, select, input, canvas, #status, #time, #path-length, #style-string, #expr-check, #model-info"
 
 
 def _rss_mib(pid: int) -> float:
