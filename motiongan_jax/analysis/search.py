@@ -16,7 +16,7 @@ better than every known style):
 - "stats", for a G without one (the paper's, NO_CLOCK_LOSS): phase-free statistics of each window
   in its walker's frame, G on its own timing (the mean and spread of every pose row, the speed of
   every row, the spread of the vertical root speed).
-docs/RESULTS.md §25 measures the search on held-out real clips and on G's own walks.
+docs/RESULTS.md §24 measures the search on held-out real clips and on G's own walks.
 """
 
 from __future__ import annotations
