@@ -496,10 +496,13 @@ def test_steer_a_minute_with_the_keys_in_two_styles(playwright_api, demo_server)
     np.testing.assert_allclose([v["clock"] for v in views], np.arange(1, ticks + 1), atol=1e-6)
 
     # speed keys: the path's spacing is the speed asked for (1.6 m/s after 0.5 s of ArrowUp, 1.2
-    # after KeyS), the root's pace follows within 10 %
+    # after KeyS) from the first sample asked for after the key (the page's buffer, up to 1.5 round
+    # trips, was emitted before it), the root's pace follows within 10 %
+    lag = max(v["target"] for v in views)
     for t0, t1, speed in ((4.5, 5.9, 1.2 + 0.8 * 0.5), (11.5, 12.9, 1.2), (20.0, 29.0, 1.2)):
         a, b = int(t0 * rate), int(t1 * rate)
-        np.testing.assert_allclose(np.linalg.norm(np.diff(curve[a:b], axis=0), axis=1), speed / rate, rtol=0.03)
+        np.testing.assert_allclose(np.linalg.norm(np.diff(curve[min(a + lag, b - 2):b], axis=0), axis=1),
+                                   speed / rate, rtol=0.03)
         pace = np.linalg.norm(root[b] - root[a]) / (t1 - t0)
         assert pace == pytest.approx(speed, rel=0.1), (t0, pace, speed)
 

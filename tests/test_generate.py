@@ -347,7 +347,8 @@ def _compiled_fast(jitted):
     cache = {}
 
     def call(*args):
-        key = tuple((np.shape(a), str(np.asarray(a).dtype)) for a in args[1:] if a is not None)
+        key = (len(args),) + tuple((np.shape(a), str(np.asarray(a).dtype)) if a is not None else None
+                                   for a in args[1:])
         if key not in cache:
             cache[key] = jitted.lower(*args).compile(compiler_options=FAST)
         return cache[key](*args)
