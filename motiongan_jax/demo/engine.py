@@ -206,8 +206,10 @@ def _call(fn, *args):
     return fn(*args)
 
 
-def _safe_name(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")[:60] or "walk"
+def _safe_name(text: str, at_most: int = 60, keep_end: bool = False, empty: str = "walk") -> str:
+    """Only safe characters, at most `at_most` of them: the start kept, or the end (a file name's suffix)."""
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_")
+    return (safe[-at_most:] if keep_end else safe[:at_most]) or empty
 
 
 class Engine:
@@ -452,8 +454,7 @@ class Engine:
         malformed one, a skeleton it cannot retarget from or a motion without steps is a
         RequestError (400) naming the problem."""
         t0 = time.perf_counter()
-        # the name's end is kept (its suffix is what a user recognises); only safe characters
-        name = re.sub(r"[^A-Za-z0-9._-]+", "_", str(name)).strip("_")[-MAX_CLIP_NAME:] or "clip.bvh"
+        name = _safe_name(str(name), MAX_CLIP_NAME, keep_end=True, empty="clip.bvh")
         if not data:
             raise RequestError(f"{name}: empty file: expected a BVH file's text")
         if len(data) > MAX_CLIP_BYTES:
