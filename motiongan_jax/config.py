@@ -96,6 +96,9 @@ class WalkerConfig:
     exact_bones: bool = True
     # G keeps a clock in walked distance at a learned per-style stride and sees its phase (RESULTS §10).
     gait_phase: bool = True
+    # G's stride follows the walking speed as the data's does (log stride linear in log speed at
+    # the slope fitted within styles; off: one stride per style whatever the speed). Needs gait_phase.
+    stride_speed: bool = False
     # G's root head gives the root's height, not its vertical velocity: no drift off the floor.
     root_height: bool = True
 
@@ -386,7 +389,8 @@ MOVED = {("model", "conv_impl"): ("compute", "conv_impl"), ("model", "compute_dt
 # (each was off at its default: a saved model section with all of them off is the paper's G).
 WALKER_FIELDS = {"output_prior": "output_prior", "g_frame": "frame", "exact_bones": "exact_bones",
                  "gait_phase": "gait_phase", "root_height": "root_height"}
-WALKER_OFF = {"output_prior": False, "frame": "world", "exact_bones": False, "gait_phase": False, "root_height": False}
+WALKER_OFF = {"output_prior": False, "frame": "world", "exact_bones": False, "gait_phase": False, "root_height": False,
+              "stride_speed": False}
 # Presets that were renamed: old config name -> new.
 RENAMED_PRESETS = {"cpu": "small", "bandai_cpu": "bandai_small"}
 

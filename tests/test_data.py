@@ -261,7 +261,8 @@ def test_gait_statistics_recover_the_embedded_styles(repo):
     cfg = load_config(repo / "configs" / "tiny.py").data
     ds = clip_cache.load_dataset(cfg)
     truth = json.loads((clip_cache.resolve_data_dir(cfg) / "styles.json").read_text())["clips"]
-    gait = gait_stats.gait_targets(ds.train, ds.style_names, ds.layout)
+    gait = gait_stats.gait_targets(ds.train, ds.style_names, ds.layout, ds.fps / cfg.frame_step)
+    assert gait.sample_hz == ds.fps / cfg.frame_step and 0.0 <= gait.stride_speed_slope <= 1.0
     assert gait.toe_joints == representation.foot_joints(ds.layout)
     want = [np.median([truth[Path(c.source).stem]["stride_length"] for c in ds.train if c.label.style == s])
             for s in ds.style_names]
@@ -274,3 +275,18 @@ def test_gait_statistics_recover_the_embedded_styles(repo):
         cycles_per_s = (phase[-1] - phase[0]) / (2 * np.pi) / ((len(phase) - 1) / clip.fps)
         assert cycles_per_s == pytest.approx(truth[Path(clip.source).stem]["cadence"] / 2, rel=0.03)
         assert np.mean(np.diff(phase) > 0) > 0.99
+
+
+def test_stride_speed_slope_within_styles_by_hand():
+    """Two styles whose clips lie on lines of slope 0.6 in log speed, log stride, at different
+    levels: pooled about each style's own means the slope is 0.6, where one line through all the
+    clips would mix the levels in; a style of one clip adds nothing; slopes outside [0, 1] are
+    held to it, and without speed differences there is no slope."""
+    x_a, x_b = np.log([0.8, 1.0, 1.3]), np.log([1.2, 1.5])
+    y_a, y_b = 0.6 * x_a - 0.3, 0.6 * x_b + 0.4
+    assert gait_stats.stride_speed_slope([x_a, x_b, np.log([2.0])], [y_a, y_b, np.log([3.0])]) == pytest.approx(0.6)
+    pooled_all = np.polyfit(np.concatenate([x_a, x_b]), np.concatenate([y_a, y_b]), 1)[0]
+    assert pooled_all > 1.0  # the levels differ with speed: a single line would overstate the slope
+    assert gait_stats.stride_speed_slope([x_a], [-0.5 * x_a]) == 0.0
+    assert gait_stats.stride_speed_slope([x_a], [2.0 * x_a]) == 1.0
+    assert gait_stats.stride_speed_slope([np.zeros(3)], [np.arange(3.0)]) == 0.0

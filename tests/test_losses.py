@@ -164,10 +164,29 @@ def test_skate_term_pays_for_lifting_a_moving_toe():
     assert np.all(g[0, 1:-1, :, 2] == pytest.approx(0.0, abs=1e-6))  # a steady slide: inner steps cancel
 
 
+def _gait_targets(**kw):
+    from motiongan_jax.data.gait_stats import GaitTargets
+
+    return GaitTargets(**{"stride_m_C": (1.0, 1.0), "speed_mps_C": (1.0, 2.0), "stride_speed_slope": 0.5,
+                          "sample_hz": 10.0, "contact_height_m": 0.02, "toe_joints": (1, 2), **kw})
+
+
 def test_stride_loss_by_hand():
     log_stride = jnp.log(jnp.array([1.0, 0.5, 2.0]))
-    got = float(losses.stride_loss(log_stride, jnp.array([0, 1, 1]), (1.0, 1.0)))
+    got = float(losses.stride_loss(log_stride, jnp.array([0, 1, 1]), _gait_targets()))
     assert got == pytest.approx((0.0 + math.log(2) ** 2 + math.log(2) ** 2) / 3, rel=1e-6)
+
+
+def test_stride_loss_that_follows_speed_by_hand():
+    """B x T strides against the data's relation at each sample's speed: style 0 (1 m at 1 m/s)
+    at 4 m/s asks for 1 m x 4^0.5 = 2 m, style 1 (1 m at 2 m/s) at 0.5 m/s asks for 0.5 m; sample
+    0 (not walked) is left out."""
+    step_BxT = jnp.array([[0.0, 0.4, 0.4], [0.0, 0.05, 0.05]])  # m per sample at 10 Hz: 4 and 0.5 m/s
+    exact = jnp.log(jnp.array([[9.0, 2.0, 2.0], [9.0, 0.5, 0.5]]))
+    assert float(losses.stride_loss(exact, jnp.array([0, 1]), _gait_targets(), step_BxT)) == pytest.approx(0, abs=1e-12)
+    off = exact.at[0, 2].add(0.3).at[1, 1].add(-0.1)
+    got = float(losses.stride_loss(off, jnp.array([0, 1]), _gait_targets(), step_BxT))
+    assert got == pytest.approx((0.3**2 + 0.1**2) / 4, rel=1e-5)
 
 
 def test_reconstruction_loss_by_hand_and_mask():

@@ -463,6 +463,41 @@ def test_gait_phase_widens_only_the_phase_inputs_and_is_used():
         plain.log_stride(w)
 
 
+def test_a_stride_that_follows_speed_by_hand():
+    """walker.stride_speed: the stride head gives a level a and a slope b; set by hand, the stride
+    at a sample walking u metres is exp(a) (u / STRIDE_STEP_CENTRE_M)^b, and G's clock advances
+    2π u / λ there: a walk twice as fast takes strides 2^b longer, so its phase runs 2^(1-b) times
+    as fast. Its head has two outputs where a stride per style has one; the option needs the clock."""
+    from motiongan_jax.nn.walker import STRIDE_GAIN, STRIDE_STEP_CENTRE_M
+
+    base = ModelConfig(base_channels=4, w_dim=8, z_dim=8,
+                       walker=walker(output_prior=True, frame="curve", gait_phase=True, stride_speed=True))
+    g = model_build.build_generator(base, J, C, None, jax.random.key(3))
+    assert g.stride_head.kernel[...].shape == (8, 2)
+    a, b = np.log(1.3), 0.7
+    g.stride_head.bias[...] = jnp.array([a, b]) / STRIDE_GAIN
+    g.stride_head.kernel[...] = jnp.zeros((8, 2))
+    w = g.style(jnp.array([0, 2], jnp.int32), jnp.ones((B, 8)))
+    u = np.array([0.06, 0.12])  # metres per sample, along a 30° heading
+    vel = jnp.asarray(np.stack([np.tile([np.sin(0.5) * ui, 0.0, np.cos(0.5) * ui], (T, 1)) for ui in u]), jnp.float32)
+    want_stride = 1.3 * (u / STRIDE_STEP_CENTRE_M) ** b
+    got = np.exp(np.asarray(g.log_stride(w, vel)))
+    chex.assert_shape(got, (B, T))
+    np.testing.assert_allclose(got[:, 1:], np.repeat(want_stride[:, None], T - 1, 1), rtol=1e-5)
+    phase = np.asarray(g.walked_phase(vel, w, jnp.array([0.5, 0.0])))
+    want_phase = np.array([[0.5], [0.0]]) + 2 * np.pi * np.arange(T)[None, :] * (u / want_stride)[:, None]
+    np.testing.assert_allclose(phase, want_phase, rtol=1e-5, atol=1e-5)
+    rate = np.diff(phase, axis=1)[:, -1]
+    assert rate[1] / rate[0] == pytest.approx(2 ** (1 - b), rel=1e-5)
+    root_vel, pose = g(vel, w)  # G walks with that clock
+    chex.assert_tree_all_finite((root_vel, pose))
+    with pytest.raises(ValueError, match="give the curve velocities"):
+        g.log_stride(w)
+    with pytest.raises(ValueError, match="needs the gait clock"):
+        model_build.build_generator(dataclasses.replace(base, walker=walker(frame="curve", stride_speed=True)),
+                                    J, C, None, jax.random.key(3))
+
+
 def test_root_height_head_gives_the_velocity_as_a_difference():
     """model.root_height: G's vertical velocity is the difference of its root head's y channel
     (v[0] = v[1], the velocity convention), so integrating it gives that height back up to a
@@ -489,7 +524,8 @@ def _gait_cfg():
         CFG, model=dataclasses.replace(CFG.model, base_channels=4, latent_init="torch_default",
                                        walker=walker(frame="curve", gait_phase=True, root_height=True)),
         train=dataclasses.replace(CFG.train, w_g_stride=1.0, w_g_floor=1.0, w_g_skate=1.0)))
-    return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), contact_height_m=0.02, toe_joints=(4, 9))
+    return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), speed_mps_C=(1.0, 1.1, 1.3, 1.5), stride_speed_slope=0.6,
+                            sample_hz=15.0, contact_height_m=0.02, toe_joints=(4, 9))
 
 
 GAIT_KEY = jax.random.key(3)
@@ -535,7 +571,7 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
                          objectives.sample_draws(CFG, C, B, jax.random.key(5))[:2])
     with pytest.raises(ValueError, match="need gait targets"):
         step_lib.make_train_step(gait_cfg, LAYOUT, C)
-    with pytest.raises(ValueError, match="3 stride lengths for 4 styles"):
+    with pytest.raises(ValueError, match="3 stride lengths and 4 speeds for 4 styles"):
         step_lib.make_train_step(gait_cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
     cfg, gait, batch, state0, state, m = _gait_step("zero")
     chex.assert_tree_all_finite(m)

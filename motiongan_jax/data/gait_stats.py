@@ -17,12 +17,19 @@ from motiongan_jax.motion.representation import RowLayout, foot_joints, from_row
 
 CONTACT_PERCENTILE = 10.0  # contact height: this percentile of real toe heights above the floor ...
 CONTACT_MARGIN_M = 0.02  # ... plus this
-SPEED_SMOOTHING_S = 0.5  # the pelvis path is smoothed over this (Gaussian sigma) to drop its sway
+# Real walkers lengthen their stride as they walk faster: log stride rises with log speed at a
+# slope between 0 (a fixed stride: cadence follows speed) and 1 (a fixed cadence). The fitted
+# slope is held to this range, so that a handful of clips cannot make a faster walk step slower.
+STRIDE_SPEED_SLOPE_RANGE = (0.0, 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
 class GaitTargets:
-    stride_m_C: tuple[float, ...]  # each style's median stride length (one left and one right step)
+    stride_m_C: tuple[float, ...]  # each style's stride (one left and one right step) at its speed below
+    speed_mps_C: tuple[float, ...]  # each style's median travel speed (m/s)
+    # d log stride / d log speed within styles, pooled over the styles (STRIDE_SPEED_SLOPE_RANGE)
+    stride_speed_slope: float
+    sample_hz: float  # network samples per second (source fps / data.frame_step): m/s = m/sample x this
     contact_height_m: float  # a toe this close to the floor counts as planted
     toe_joints: tuple[int, int]  # kept-joint indices of the left and right toe
 
@@ -32,14 +39,18 @@ def clip_toe_heights(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> np
     return gait.toe_heights(np.asarray(from_rows(clip.root_Fx3, clip.pose_FxR, layout))[:, list(toes)])
 
 
-def clip_stride_m(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> float:
-    """Stride length of a clip: its walking speed (the smoothed pelvis path's length over the
-    clip's duration) over its step frequency (gait.step_frequency_hz); nan without steps."""
+def clip_speed_and_stride(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> tuple[float, float]:
+    """(travel speed m/s, stride length m) of a clip: the root path averaged over one gait cycle
+    (gait.travel_speed_mps: no sway, no slowing at the ends), and that speed over the step
+    frequency (gait.step_frequency_hz); nan without steps."""
     freq = gait.step_frequency_hz(clip_toe_heights(clip, layout, toes), clip.fps)
-    xz = gaussian_filter1d(np.asarray(clip.root_Fx3, np.float64)[:, [0, 2]], SPEED_SMOOTHING_S * clip.fps,
-                           axis=0, mode="nearest")
-    speed = np.sum(np.linalg.norm(np.diff(xz, axis=0), axis=1)) * clip.fps / (len(xz) - 1)
-    return float(speed / freq) if np.isfinite(freq) and freq > 0 else float("nan")
+    speed = gait.travel_speed_mps(clip.root_Fx3, clip.fps, freq)
+    return (speed, speed / freq) if np.isfinite(speed) and speed > 0 else (float("nan"), float("nan"))
+
+
+def clip_stride_m(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> float:
+    """Stride length of a clip (`clip_speed_and_stride`); nan without steps."""
+    return clip_speed_and_stride(clip, layout, toes)[1]
 
 
 PHASE_DETREND_S = 2.0  # the toe-height difference minus its moving average over this ...
@@ -76,18 +87,41 @@ def contact_height(clips: list[Clip], layout: RowLayout, toes: tuple[int, int]) 
     return gait.contact_height_threshold(heights, CONTACT_PERCENTILE) + CONTACT_MARGIN_M
 
 
-def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLayout) -> GaitTargets:
-    """Stride lengths per style (median over its clips) and the contact height, measured on real
-    clips without annotation. A style none of whose clips shows a step frequency is an error."""
-    toes = foot_joints(layout)
-    by_style: dict[str, list[float]] = {s: [] for s in style_names}
-    for clip in clips:
-        by_style[clip.label.style].append(clip_stride_m(clip, layout, toes))
-    strides = []
-    for style in style_names:
-        vals = [v for v in by_style[style] if np.isfinite(v)]
-        if not vals:
-            raise DataError(f"style {style!r}: no clip with a measurable step frequency (no stride length)")
-        strides.append(float(np.median(vals)))
-    return GaitTargets(tuple(strides), contact_height(clips, layout, toes), toes)
+def stride_speed_slope(log_speed_by_style: list[np.ndarray], log_stride_by_style: list[np.ndarray]) -> float:
+    """The slope of log stride on log speed within styles, pooled over them (each style's clips
+    about their own means, one least-squares line), held to STRIDE_SPEED_SLOPE_RANGE; 0 when no
+    style's clips differ in speed."""
+    sxy = sxx = 0.0
+    for x, y in zip(log_speed_by_style, log_stride_by_style):
+        if len(x) >= 2:
+            sxy += float(np.sum((x - x.mean()) * (y - y.mean())))
+            sxx += float(np.sum(np.square(x - x.mean())))
+    slope = sxy / sxx if sxx > 1e-12 else 0.0
+    return float(np.clip(slope, *STRIDE_SPEED_SLOPE_RANGE))
 
+
+def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLayout,
+                 sample_hz: float) -> GaitTargets:
+    """Each style's median speed and its stride there, the stride–speed slope within styles
+    (`stride_speed_slope`) and the contact height, measured on real clips without annotation;
+    `sample_hz` is the network's samples per second. A style none of whose clips shows a step
+    frequency is an error."""
+    toes = foot_joints(layout)
+    by_style: dict[str, list[tuple[float, float]]] = {s: [] for s in style_names}
+    for clip in clips:
+        by_style[clip.label.style].append(clip_speed_and_stride(clip, layout, toes))
+    log_speeds, log_strides = [], []
+    for style in style_names:
+        vals = np.array([v for v in by_style[style] if np.all(np.isfinite(v))], np.float64).reshape(-1, 2)
+        if not len(vals):
+            raise DataError(f"style {style!r}: no clip with a measurable step frequency (no stride length)")
+        log_speeds.append(np.log(vals[:, 0]))
+        log_strides.append(np.log(vals[:, 1]))
+    slope = stride_speed_slope(log_speeds, log_strides)
+    speeds, strides = [], []
+    for x, y in zip(log_speeds, log_strides):
+        centre = float(np.median(x))
+        speeds.append(float(np.exp(centre)))
+        strides.append(float(np.exp(np.median(y - slope * (x - centre)))))  # at the median speed
+    return GaitTargets(tuple(strides), tuple(speeds), slope, float(sample_hz), contact_height(clips, layout, toes),
+                       toes)

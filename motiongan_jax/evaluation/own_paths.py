@@ -13,8 +13,8 @@ sampled the same way, is cut into the same back-to-back windows. On these pairs:
 - the stride–speed relation: every style walked on a straight line at each of STRIDE_SPEEDS, its
   step frequency against speed fitted over the speeds within FIT_BAND, against the real
   held-out clips' (per style, and pooled within styles: one slope, a level per style);
-- how strides are measured: per style, the training's stride targets (`gait_stats.clip_stride_m`, a
-  smoothed pelvis path) against distance per gait cycle and per counted cycle, on held-out clips.
+- how strides are measured: per style, the training's stride targets (`gait_stats.clip_stride_m`: the
+  root path averaged over one gait cycle) against distance per gait cycle and per counted cycle, on held-out clips.
 Functions take the protocol's Context (protocol.py); pure measures live in realism.py and metrics.py.
 """
 

@@ -232,9 +232,9 @@ def realism_markdown(r: dict, h: dict) -> list[str]:
         lines.append(f"| {name} | " + " | ".join(_fmt(g[f"step_frequency_hz@{s:g}"]["mean"]) for s in speeds)
                      + f" | {_fmt(g['stride_speed_slope']['mean'])} | {_fmt(v['real'].get('stride_speed_slope'))} |")
     lines += ["", "Stride measured three ways on the held-out clips (median per style, metres per gait cycle): "
-                  "the training's target (speed of the smoothed pelvis path over the step frequency), path "
-                  "length over duration over the step frequency, and the path between the first and last "
-                  "counted half-cycle over the cycles counted:", "",
+                  "the training's target (the root path averaged over one gait cycle: its speed over the "
+                  "step frequency), path length over duration over the step frequency, and the path between "
+                  "the first and last counted half-cycle over the cycles counted:", "",
               "| style | clips | training's measure | distance per cycle | counted | speed (m/s) |",
               "|---|---|---|---|---|---|"]
     for name in h["style_names"]:

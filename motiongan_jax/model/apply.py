@@ -77,13 +77,16 @@ def apply_code(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None, phase_BxT=Non
 
 
 @jax.jit
-def _stride_m(model, w_BxD):
-    return jnp.exp(generator(model).log_stride(w_BxD))
+def _stride_m(model, w_BxD, curve_vel_BxTx3):
+    return jnp.exp(generator(model).log_stride(w_BxD, curve_vel_BxTx3))
 
 
-def stride_m(model, w_BxD) -> np.ndarray:
-    """λ(w): the stride length (metres) of each style code, for a G with a gait clock."""
-    return np.asarray(_stride_m(generator_state(model), np.asarray(w_BxD, np.float32)))
+def stride_m(model, w_BxD, curve_vel_BxTx3=None) -> np.ndarray:
+    """The stride length (metres) of each style code, for a G with a gait clock: λ(w) (B), or for a
+    stride that follows speed (model.walker.stride_speed) λ(w, v) at each sample of the curve
+    velocities (B x T)."""
+    curve = None if curve_vel_BxTx3 is None else np.asarray(curve_vel_BxTx3, np.float32)
+    return np.asarray(_stride_m(generator_state(model), np.asarray(w_BxD, np.float32), curve))
 
 
 @jax.jit
@@ -93,7 +96,7 @@ def _walked_phase(model, curve_vel_BxTx3, w_BxD, phase_offset_B):
 
 def walked_phase(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None) -> np.ndarray:
     """B x T: the gait phase (radians) G walks the curve velocities with, from `phase_offset_B`
-    (None: 0): G's own clock (nn.walker.walked_phase at its stride λ(w))."""
+    (None: 0): G's own clock (nn.walker.walked_phase at its stride, `stride_m`)."""
     b = len(w_BxD)
     offset = np.zeros(b, np.float32) if phase_offset_B is None else np.asarray(phase_offset_B, np.float32)
     return np.asarray(_walked_phase(generator_state(model), np.asarray(curve_vel_BxTx3, np.float32),

@@ -112,6 +112,24 @@ def walking_speed_mps(root_Tx3, fps: float) -> float:
     return _floor_path_length(root) * arrays.positive(fps, "fps") / (root.shape[0] - 1)
 
 
+def travel_speed_mps(root_Tx3, fps: float, cycle_hz: float) -> float:
+    """Travel speed (m/s) with the body's sway taken out: the root's floor path averaged over one
+    gait cycle (a moving average 1/`cycle_hz` long, which cancels the sway, bob and surge at every
+    harmonic of the cycle), its length over its duration. Unlike a smoothing that pads the ends,
+    it is not slowed at the clip's ends. nan if `cycle_hz` is nan or the clip is shorter than two
+    cycles."""
+    root = arrays.float_array(root_Tx3, "root_Tx3", 2, shape=(None, 3), min_len=2)
+    fps = arrays.positive(fps, "fps")
+    if not np.isfinite(cycle_hz) or cycle_hz <= 0:
+        return float("nan")
+    n = max(int(round(fps / cycle_hz)), 1)
+    if root.shape[0] < 2 * n:
+        return float("nan")
+    kernel = np.ones(n) / n
+    xz = np.stack([np.convolve(root[:, i], kernel, mode="valid") for i in (0, 2)], axis=1)
+    return float(np.sum(np.linalg.norm(np.diff(xz, axis=0), axis=1)) * fps / (len(xz) - 1))
+
+
 def distance_per_cycle_m(root_Tx3, heights_Tx2, fps: float) -> float:
     """Distance walked per gait cycle (metres; one left and one right step): walking speed over
     step frequency (`step_frequency_hz`). nan where the step frequency is."""

@@ -19,9 +19,12 @@ root height, output prior, exact bones and the curve frame on the way out. docs/
   answered with a stretched body.
 * Gait phase (model.gait_phase): an equal-arc-length curve is nearly constant on straight
   stretches, so a convolutional G has nothing to hang a gait cycle on. With the option G keeps
-  a clock in walked distance, φ[t] = φ0 + 2π s[t] / λ(w) (`walked_phase`), λ(w) the style's
+  a clock in walked distance, φ[t] = φ0 + 2π Σ Δs / λ (`walked_phase`), λ(w) the style's
   stride length from `stride_head` (trained on strides measured on real clips,
   `losses.stride_loss`), φ0 random per training sample (`train.objectives.sample_draws`), 0 at generation.
+* Stride that follows speed (model.walker.stride_speed): λ(w, v) = exp(a(w) + b(w) log v), so a
+  style walked faster lengthens its stride as real walkers do (the data's relation,
+  `data.gait_stats.stride_speed_slope`), instead of stepping faster at one stride.
   sin and cos of φ and 2φ (`gait_phase`) enter ec0_0, the skips e1 and e2 and dc1_0's input.
   A clock in distance stays right under the FPS augmentation.
 * Root height (model.root_height): the root head's y channel is the root's height (up to a
@@ -60,16 +63,29 @@ PHASE_HARMONICS = 2  # φ and 2φ: a foot's cycle and the body's bounce, twice p
 # the stride head's output lets the stride reach its targets in hundreds of steps, not thousands.
 STRIDE_GAIN = 10.0
 PHASE_CHANNELS = 2 * PHASE_HARMONICS
+# A stride that follows speed reads log speed centred here (metres per sample), so that the head's
+# two outputs, level and slope, are not one and the same direction for Adam ...
+STRIDE_STEP_CENTRE_M = 0.1
+# ... and a sample slower than this (standing) counts as this: its stride stays finite.
+STRIDE_MIN_STEP_M = 0.005
 
 
-def walked_phase(curve_vel_BxTx3: jax.Array, stride_B: jax.Array, offset_B: jax.Array) -> jax.Array:
-    """B x T gait phase (radians) φ[t] = φ0 + 2π s[t] / λ, where s[t] is the horizontal distance
-    walked up to sample t (the sum of |v[1..t]|, metres; v[0] duplicates v[1] and is not walked, as
-    in trajectory.integrate), λ = `stride_B` metres and φ0 = `offset_B` radians."""
-    b = curve_vel_BxTx3.shape[0]
-    chex.assert_shape((stride_B, offset_B), (b,))
-    step_BxT = jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1).at[:, 0].set(0.0)
-    return offset_B[:, None] + 2 * jnp.pi * jnp.cumsum(step_BxT, axis=1) / stride_B[:, None]
+def walked_step(curve_vel_BxTx3: jax.Array) -> jax.Array:
+    """B x T horizontal distance walked in each sample (metres, |v[t]| over the floor); 0 at t = 0,
+    where v[0] duplicates v[1] and is not walked (as in trajectory.integrate)."""
+    return jnp.linalg.norm(curve_vel_BxTx3[..., ::2], axis=-1).at[:, 0].set(0.0)
+
+
+def walked_phase(curve_vel_BxTx3: jax.Array, stride: jax.Array, offset_B: jax.Array) -> jax.Array:
+    """B x T gait phase (radians) φ[t] = φ0 + 2π Σ_{u<=t} Δs[u] / λ[u], Δs = `walked_step`, λ =
+    `stride` metres (B: one per walk, or B x T: one per sample) and φ0 = `offset_B` radians."""
+    b, t = curve_vel_BxTx3.shape[:2]
+    chex.assert_shape(offset_B, (b,))
+    chex.assert_shape(stride, (b,) if stride.ndim == 1 else (b, t))
+    step_BxT = walked_step(curve_vel_BxTx3)
+    if stride.ndim == 1:  # one stride: the distance walked over it
+        return offset_B[:, None] + 2 * jnp.pi * jnp.cumsum(step_BxT, axis=1) / stride[:, None]
+    return offset_B[:, None] + 2 * jnp.pi * jnp.cumsum(step_BxT / stride, axis=1)
 
 
 def gait_phase(phase_BxT: jax.Array) -> jax.Array:
@@ -96,6 +112,9 @@ class WalkerGenerator(Generator):
         if rest_pose_R is not None and len(rest_pose_R) != self.num_rows:
             raise ValueError(f"rest_pose_R has {len(rest_pose_R)} rows, G makes {self.num_rows}")
         frame, gait_phase, root_height = walker.frame, walker.gait_phase, walker.root_height
+        if walker.stride_speed and not gait_phase:
+            raise ValueError("a stride that follows speed (walker.stride_speed) needs the gait clock "
+                             "(walker.gait_phase)")
         residual_root = walker.output_prior
         # a tuple of floats: static (part of the graph definition), not a parameter
         self.rest_pose_R = None if rest_pose_R is None else tuple(float(v) for v in rest_pose_R)
@@ -111,30 +130,40 @@ class WalkerGenerator(Generator):
         self.bones = bones  # static: part of the graph definition
         self.gait_phase = bool(gait_phase)  # static
         self.root_height = bool(root_height)
-        # log stride length (metres) of the style; zero init: 1 m strides until trained
-        self.stride_head = (Dense(self.w_dim, 1, kernel_init=zeros_init, bias_init=zeros_init, rngs=rngs)
-                            if self.gait_phase else None)
+        self.stride_speed = bool(walker.stride_speed)  # static
+        # log stride length (metres) of the style (and its slope in log speed); zero init: 1 m
+        # strides until trained
+        self.stride_head = (Dense(self.w_dim, 2 if self.stride_speed else 1, kernel_init=zeros_init,
+                                  bias_init=zeros_init, rngs=rngs) if self.gait_phase else None)
 
     @property
     def has_gait_phase(self) -> bool:
         return self.gait_phase
 
-    def log_stride(self, w_BxD: jax.Array) -> jax.Array:
-        """log of the stride length λ(w) in metres (B), for a G with a gait phase."""
+    def log_stride(self, w_BxD: jax.Array, curve_vel_BxTx3: jax.Array | None = None) -> jax.Array:
+        """log of the stride length in metres, for a G with a gait phase: λ(w) (B), or, for a
+        stride that follows speed (walker.stride_speed), λ(w, v) at each sample's walked step
+        along `curve_vel_BxTx3` (B x T; log λ = a(w) + b(w) log(v / STRIDE_STEP_CENTRE_M))."""
         if self.stride_head is None:
             raise ValueError("this G has no gait phase (model.gait_phase)")
-        return STRIDE_GAIN * self.stride_head(w_BxD)[:, 0]
+        head_BxK = STRIDE_GAIN * self.stride_head(w_BxD)
+        if not self.stride_speed:
+            return head_BxK[:, 0]
+        if curve_vel_BxTx3 is None:
+            raise ValueError("this G's stride follows speed (walker.stride_speed): give the curve velocities")
+        log_step_BxT = jnp.log(jnp.maximum(walked_step(curve_vel_BxTx3), STRIDE_MIN_STEP_M) / STRIDE_STEP_CENTRE_M)
+        return head_BxK[:, :1] + head_BxK[:, 1:2] * log_step_BxT
 
     def walked_phase(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array,
                      phase_offset_B: jax.Array | None = None) -> jax.Array:
-        """B x T: the phase this G walks a curve with (`walked_phase` at its stride λ(w), offset
-        default 0)."""
+        """B x T: the phase this G walks a curve with (`walked_phase` at its stride, `log_stride`,
+        offset default 0)."""
         b = curve_vel_BxTx3.shape[0]
         offset_B = jnp.zeros((b,), jnp.float32) if phase_offset_B is None else phase_offset_B
         # the stride is learned from measured strides alone (losses.stride_loss): the GAN's
         # gradient through sin(2π s / λ) is periodic in 1/λ and would only add noise
-        stride_B = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxD)))
-        return walked_phase(curve_vel_BxTx3, stride_B, offset_B)
+        stride = jax.lax.stop_gradient(jnp.exp(self.log_stride(w_BxD, curve_vel_BxTx3)))
+        return walked_phase(curve_vel_BxTx3, stride, offset_B)
 
     def __call__(self, curve_vel_BxTx3: jax.Array, w_BxD: jax.Array, phase_offset_B: jax.Array | None = None,
                  phase_BxT: jax.Array | None = None) -> tuple[jax.Array, jax.Array]:

@@ -113,9 +113,12 @@ def make_step_fn(cfg: Config, dataset, log=print):
     training clips when the config's gait terms need them."""
     gait = None
     if step_lib.needs_gait_targets(cfg.train):
-        gait = gait_stats.gait_targets(dataset.train, dataset.style_names, dataset.layout)
+        gait = gait_stats.gait_targets(dataset.train, dataset.style_names, dataset.layout,
+                                       dataset.fps / cfg.data.frame_step)
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
-            + ", ".join(f"{n} {v:.2f} m" for n, v in zip(dataset.style_names, gait.stride_m_C)))
+            + ", ".join(f"{n} {v:.2f} m at {s:.2f} m/s" for n, v, s in
+                        zip(dataset.style_names, gait.stride_m_C, gait.speed_mps_C))
+            + f"; log stride rises {gait.stride_speed_slope:.2f} x log speed within styles")
     return step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
 
 

@@ -164,11 +164,20 @@ def joint_jerk_excess(fake_vel_BxTx3: jax.Array, fake_pose_BxTxR: jax.Array, rea
     return jnp.sum(jax.nn.relu(excess_J)) / unit**2
 
 
-def stride_loss(log_stride_B: jax.Array, labels_B: jax.Array, stride_m_C) -> jax.Array:
-    """Mean squared error of G's log stride length against the log of the requested style's
-    stride measured on real clips (metres; data.style_strides)."""
-    target_B = jnp.log(jnp.asarray(stride_m_C, jnp.float32))[labels_B]
-    return jnp.mean(jnp.square(log_stride_B - target_B))
+def stride_loss(log_stride: jax.Array, labels_B: jax.Array, gait, step_m_BxT: jax.Array | None = None) -> jax.Array:
+    """Mean squared error of G's log stride length (metres) against the data's for the requested
+    styles (data.GaitTargets). `log_stride` B: one stride per style, against the style's measured
+    stride. B x T (a stride that follows speed): at each sample's walked step `step_m_BxT` (metres
+    per sample, samples 1.. only), against the data's stride–speed relation there, log stride_C +
+    slope (log v − log speed_C), v = step x gait.sample_hz."""
+    log_stride_C = jnp.log(jnp.asarray(gait.stride_m_C, jnp.float32))
+    if log_stride.ndim == 1:
+        return jnp.mean(jnp.square(log_stride - log_stride_C[labels_B]))
+    log_speed_BxT = jnp.log(jnp.maximum(step_m_BxT[:, 1:] * gait.sample_hz, 1e-6))
+    log_speed_C = jnp.log(jnp.asarray(gait.speed_mps_C, jnp.float32))
+    target_BxT = (log_stride_C[labels_B][:, None]
+                  + gait.stride_speed_slope * (log_speed_BxT - log_speed_C[labels_B][:, None]))
+    return jnp.mean(jnp.square(log_stride[:, 1:] - target_BxT))
 
 
 def reconstruction_loss(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR, valid_BxT,

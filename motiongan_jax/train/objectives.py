@@ -10,6 +10,7 @@ import jax.numpy as jnp
 
 from motiongan_jax.motion import trajectory
 from motiongan_jax.nn import Discriminator
+from motiongan_jax.nn.walker import walked_step
 from motiongan_jax.train import losses
 
 
@@ -50,12 +51,13 @@ def g_weights(train_cfg) -> dict[str, float]:
 
 
 def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, batch: dict, train_cfg,
-             length_unit: float, *, bone_pairs, bone_lengths_m, gait=None, log_stride_B=None) -> dict[str, jax.Array]:
+             length_unit: float, *, bone_pairs, bone_lengths_m, gait=None, log_stride=None) -> dict[str, jax.Array]:
     """Every active term of G's loss (one D call), `g_<name>` unweighted, and `g_total`, their sum
     weighted by `g_weights`. Curve, bone, foot, jerk and reconstruction terms are in units of
     length_unit. The real batch gives the curve, the jerk terms' bounds and the reconstruction's
     targets (the rows `batch["rec_B"]` marks, at the samples `phase_valid_BxT` marks). The gait
-    terms need `gait` (data.GaitTargets), the stride term also G's `log_stride_B`."""
+    terms need `gait` (data.GaitTargets), the stride term also G's `log_stride` (B, or B x T:
+    nn.WalkerGenerator.log_stride)."""
     weights = g_weights(train_cfg)
     active = [n for n in G_TERMS if n in PAPER_G_TERMS or weights[n]]
     real_vel_BxTx3 = trajectory.velocity(batch["root_BxTx3"])
@@ -75,7 +77,8 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, b
         terms["joint_jerk"] = losses.joint_jerk_excess(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3,
                                                        real_pose_BxTxR, length_unit)
     if "stride" in active:
-        terms["stride"] = losses.stride_loss(log_stride_B, fake_labels_B, gait.stride_m_C)
+        terms["stride"] = losses.stride_loss(log_stride, fake_labels_B, gait,
+                                             walked_step(trajectory.velocity(batch["curve_BxTx3"])))
     if "rec" in active:
         valid_BxT = batch["phase_valid_BxT"] & batch["rec_B"][:, None]
         terms["rec"] = losses.reconstruction_loss(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, real_pose_BxTxR,

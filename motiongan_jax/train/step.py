@@ -70,8 +70,9 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     tcfg = cfg.train
     if needs_gait_targets(tcfg) and gait is None:
         raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate) need gait targets")
-    if gait is not None and len(gait.stride_m_C) != num_styles:
-        raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths for {num_styles} styles")
+    if gait is not None and not len(gait.stride_m_C) == len(gait.speed_mps_C) == num_styles:
+        raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths and {len(gait.speed_mps_C)} "
+                         f"speeds for {num_styles} styles")
     if tcfg.gan_loss not in choices(GanLoss):
         raise ValueError(f"train.gan_loss must be one of {choices(GanLoss)}, got {tcfg.gan_loss!r}")
     count_rel_joints(layout)
@@ -100,7 +101,7 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
             if tcfg.w_g_rec:
                 phase_BxT = jnp.where(batch["rec_B"][:, None], batch["phase_BxT"], g.walked_phase(curve_vel, w, phase))
             root_vel, pose = g(curve_vel, w, phase, phase_BxT)
-            return root_vel, pose, (g.log_stride(w) if g.has_gait_phase else None)
+            return root_vel, pose, (g.log_stride(w, curve_vel) if g.has_gait_phase else None)
 
         fake, g_vjp = jax.vjp(g_forward, state.g_params)
 
@@ -118,7 +119,7 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
         def g_objective(fake_out):
             d = nnx.merge(state.d_def, d_params, sn, copy=True)
             terms = g_losses(d, *fake_out[:2], fake_labels, batch, tcfg, LENGTH_UNIT_M, bone_pairs=bone_pairs,
-                             bone_lengths_m=bone_lengths, gait=gait, log_stride_B=fake_out[2])
+                             bone_lengths_m=bone_lengths, gait=gait, log_stride=fake_out[2])
             return terms["g_total"], (terms, nnx.state(d, SpectralNormState))
 
         (_, (g_terms, sn)), fake_grads = jax.value_and_grad(g_objective, has_aux=True)(fake)
