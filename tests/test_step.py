@@ -680,3 +680,32 @@ def test_phase_offsets_are_not_a_function_of_z():
     shared = [(jax.random.normal(jax.random.split(k)[1], (B, 8))[0, 0],
                jax.random.uniform(jax.random.fold_in(k, 1), (B,))[0]) for k in keys[:50]]
     assert scipy.stats.spearmanr(*np.array(shared, np.float64).T)[0] > 0.99
+
+
+def test_train_step_teaches_a_stride_that_follows_speed():
+    """walker.stride_speed in the step: G's stride term is the mean over windows and walked samples
+    of (log λ(w, v) − the data's log stride at v)², the step's curve speeds converted at the
+    targets' sample rate; at init (λ = 1 m everywhere) that is the mean of the targets' squared logs
+    by hand, and Adam's first step moves the level and the slope by the learning rate against the
+    sign of their gradients (2·GAIN·mean(err) and 2·GAIN·mean(err·log(v/centre)))."""
+    from motiongan_jax.nn.walker import STRIDE_GAIN, STRIDE_STEP_CENTRE_M
+
+    cfg0, gait = _gait_cfg()
+    cfg = validate(dataclasses.replace(cfg0, model=dataclasses.replace(
+        cfg0.model, walker=dataclasses.replace(cfg0.model.walker, stride_speed=True))))
+    batch = _batch()
+    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    state, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, GAIT_KEY).compile(
+        compiler_options=FAST)(state0, batch, GAIT_KEY)
+    chex.assert_tree_all_finite(m)
+    labels = np.asarray(objectives.sample_draws(cfg, C, B, GAIT_KEY)[0])
+    curve = np.asarray(batch["curve_BxTx3"], np.float64)
+    step_BxT = np.linalg.norm(np.diff(curve[..., ::2], axis=1), axis=-1)  # samples 1..T-1
+    target = (np.log(np.asarray(gait.stride_m_C))[labels][:, None] + gait.stride_speed_slope
+              * (np.log(step_BxT * gait.sample_hz) - np.log(np.asarray(gait.speed_mps_C))[labels][:, None]))
+    err = 0.0 - target  # log λ = 0 at init: the zero-initialised head
+    assert float(m["g_stride"]) == pytest.approx(np.mean(err**2), rel=1e-4)
+    log_step = np.log(np.maximum(step_BxT, 0.005) / STRIDE_STEP_CENTRE_M)
+    grad_bias = 2 * STRIDE_GAIN * np.array([err.mean(), (err * log_step).mean()])
+    bias0, bias1 = (np.asarray(s.g_params["stride_head"]["bias"][...]) for s in (state0, state))
+    np.testing.assert_allclose(bias1 - bias0, -cfg.train.lr_g * np.sign(grad_bias), rtol=1e-4)
