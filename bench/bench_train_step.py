@@ -54,7 +54,9 @@ def stand_in_gait(cfg, layout, num_styles):
     the step's cost), else None."""
     if not step_lib.needs_gait_targets(cfg.train):
         return None
-    return gait_stats.GaitTargets((1.2,) * num_styles, 0.02, foot_joints(layout))
+    return gait_stats.GaitTargets(stride_m_C=(1.2,) * num_styles, speed_mps_C=(1.2,) * num_styles,
+                                  step_height_m_C=(0.06,) * num_styles, stride_speed_slope=0.6,
+                                  sample_hz=15.0, contact_height_m=0.02, toe_joints=foot_joints(layout))
 
 
 def bench_step_fn(cfg, layout, num_styles):

@@ -159,6 +159,10 @@ class TrainConfig:
     w_g_stride: float = 0.0
     w_g_floor: float = 0.0
     w_g_skate: float = 0.0
+    # Step height (0 in the paper): each window's toe-height difference (left − right, its standard
+    # deviation) against its style's measured on real clips, in log (losses.step_height_loss): the
+    # skate term pays a moving toe to lift, and nothing else says how high (RESULTS §23).
+    w_g_step_height: float = 0.0
     # Reconstruction (0 in the paper): the first half of each batch asks G for the real window's
     # own style at its measured gait phase and compares pose and root sway (L1), so that the
     # phase channels mean what the real feet do (losses.reconstruction_loss).
@@ -348,7 +352,7 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
     need(t.log_every >= 1 and t.checkpoint_every >= 1 and t.preview_every >= 0, "train.log_every",
          "log/checkpoint intervals must be >= 1")
     need(0.0 <= t.g_ema_decay < 1.0, "train.g_ema_decay", "must be in [0, 1) (0: no average)")
-    for name in ("w_g_stride", "w_g_floor", "w_g_skate", "w_g_rec", "w_g_root_jerk", "w_g_joint_jerk"):
+    for name in (f"w_g_{n}" for n in ("stride", "floor", "skate", "step_height", "rec", "root_jerk", "joint_jerk")):
         need(getattr(t, name) >= 0, f"train.{name}", "loss weights must be >= 0")
     need(m.walker is None or isinstance(m.walker, WalkerConfig), "model.walker", "None or a WalkerConfig")
     need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride",

@@ -267,6 +267,13 @@ def test_gait_statistics_recover_the_embedded_styles(repo):
     want = [np.median([truth[Path(c.source).stem]["stride_length"] for c in ds.train if c.label.style == s])
             for s in ds.style_names]
     np.testing.assert_allclose(gait.stride_m_C, want, rtol=0.05)
+    # step heights (toes' left − right) order the styles as the ankle lift they were made with
+    lifts = [np.median([truth[Path(c.source).stem]["foot_lift"] for c in ds.train if c.label.style == s])
+             for s in ds.style_names]
+    from scipy.stats import spearmanr
+
+    assert spearmanr(gait.step_height_m_C, lifts).correlation > 0.8
+    assert int(np.argmax(gait.step_height_m_C)) == int(np.argmax(lifts))
     assert 0.02 <= gait.contact_height_m < 0.03  # planted toes sit on the floor: ~2 cm above the 10th percentile
     for clip in ds.train[:: len(ds.train) // 6]:
         phase, valid = gait_stats.clip_gait_phase(clip, ds.layout, gait.toe_joints)

@@ -167,7 +167,8 @@ def test_skate_term_pays_for_lifting_a_moving_toe():
 def _gait_targets(**kw):
     from motiongan_jax.data.gait_stats import GaitTargets
 
-    return GaitTargets(**{"stride_m_C": (1.0, 1.0), "speed_mps_C": (1.0, 2.0), "stride_speed_slope": 0.5,
+    return GaitTargets(**{"stride_m_C": (1.0, 1.0), "speed_mps_C": (1.0, 2.0), "step_height_m_C": (0.05, 0.05),
+                          "stride_speed_slope": 0.5,
                           "sample_hz": 10.0, "contact_height_m": 0.02, "toe_joints": (1, 2), **kw})
 
 
@@ -187,6 +188,33 @@ def test_stride_loss_that_follows_speed_by_hand():
     off = exact.at[0, 2].add(0.3).at[1, 1].add(-0.1)
     got = float(losses.stride_loss(off, jnp.array([0, 1]), _gait_targets(), step_BxT))
     assert got == pytest.approx((0.3**2 + 0.1**2) / 4, rel=1e-5)
+
+
+def test_step_height_loss_by_hand_and_against_gait_measure():
+    """Two windows, toes 1 and 2 (kept-joint order, root 0) of pose rows: window 0 lifts its toes in
+    turn by ±a (left − right = 2a·sin, standard deviation √2·a), window 1 keeps them level (0: the
+    floor's 1 mm). Each against its style's target by hand, and the same measure as the protocol's
+    gait.step_amplitude_m."""
+    from motiongan_jax.motion import gait
+
+    T, a = 32, 0.03
+    s_T = np.sin(2 * np.pi * np.arange(T) / 16)  # two whole cycles: mean 0, mean square 1/2
+    pose = np.zeros((2, T, 6), np.float32)
+    pose[0, :, 1], pose[0, :, 4] = a * s_T, -a * s_T  # toe 1's y, toe 2's y
+    vel = jnp.zeros((2, T, 3))
+    std0 = np.sqrt(2) * a
+    assert gait.step_amplitude_m(np.stack([pose[0, :, 1], pose[0, :, 4]], 1)) == pytest.approx(std0, rel=1e-5)
+    targets = (0.05, 0.02)
+    got = float(losses.step_height_loss(vel, jnp.asarray(pose), jnp.array([0, 1]), (1, 2), targets))
+    want = ((0.5 * np.log(std0**2 + 1e-6) - np.log(0.05)) ** 2 + (0.5 * np.log(1e-6) - np.log(0.02)) ** 2) / 2
+    assert got == pytest.approx(want, rel=1e-5)
+    # on target: 0, whatever the root does (heights are differences of two toes)
+    exact = float(losses.step_height_loss(jnp.ones((2, T, 3)), jnp.asarray(pose[:1]), jnp.array([0]), (1, 2),
+                                          (np.sqrt(std0**2 + 1e-6),)))
+    assert exact == pytest.approx(0.0, abs=1e-9)
+    # a finite gradient where the toes never part (the square root is never taken at 0)
+    g = jax.grad(lambda p: losses.step_height_loss(vel[1:], p, jnp.array([0]), (1, 2), (0.05,)))(jnp.asarray(pose[1:]))
+    assert np.all(np.isfinite(np.asarray(g)))
 
 
 def test_reconstruction_loss_by_hand_and_mask():

@@ -523,8 +523,9 @@ def _gait_cfg():
     cfg = validate(dataclasses.replace(
         CFG, model=dataclasses.replace(CFG.model, base_channels=4, latent_init="torch_default",
                                        walker=walker(frame="curve", gait_phase=True, root_height=True)),
-        train=dataclasses.replace(CFG.train, w_g_stride=1.0, w_g_floor=1.0, w_g_skate=1.0)))
-    return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), speed_mps_C=(1.0, 1.1, 1.3, 1.5), stride_speed_slope=0.6,
+        train=dataclasses.replace(CFG.train, w_g_stride=1.0, w_g_floor=1.0, w_g_skate=1.0, w_g_step_height=1.0)))
+    return cfg, GaitTargets(stride_m_C=(0.7, 0.9, 1.2, 1.5), speed_mps_C=(1.0, 1.1, 1.3, 1.5),
+                            step_height_m_C=(0.03, 0.05, 0.06, 0.08), stride_speed_slope=0.6,
                             sample_hz=15.0, contact_height_m=0.02, toe_joints=(4, 9))
 
 
@@ -575,7 +576,8 @@ def test_train_step_with_the_gait_terms_draws_offsets_and_trains_the_stride_head
         step_lib.make_train_step(gait_cfg, LAYOUT, C, dataclasses.replace(gait, stride_m_C=(1.0, 1.0, 1.0)))
     cfg, gait, batch, state0, state, m = _gait_step("zero")
     chex.assert_tree_all_finite(m)
-    assert {"g_stride", "g_floor", "g_skate"} <= set(m) and float(m["g_stride"]) > 0  # values: tests/test_losses.py
+    assert {"g_stride", "g_floor", "g_skate", "g_step_height"} <= set(m)  # their values: tests/test_losses.py
+    assert float(m["g_stride"]) > 0 and float(m["g_step_height"]) > 0
     k0 = state0.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :]
     assert float(jnp.abs(state.g_params["ec0_0"]["conv"]["kernel"][..., 1:, :] - k0).min()) > 0  # phase weights train
     # only the stride term reaches the stride head (G's phase sees a stop-gradient stride, the

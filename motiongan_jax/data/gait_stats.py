@@ -27,6 +27,7 @@ STRIDE_SPEED_SLOPE_RANGE = (0.0, 1.0)
 class GaitTargets:
     stride_m_C: tuple[float, ...]  # each style's stride (one left and one right step) at its speed below
     speed_mps_C: tuple[float, ...]  # each style's median travel speed (m/s)
+    step_height_m_C: tuple[float, ...]  # each style's median step height (gait.step_amplitude_m) over its clips
     # d log stride / d log speed within styles, pooled over the styles (STRIDE_SPEED_SLOPE_RANGE)
     stride_speed_slope: float
     sample_hz: float  # network samples per second (source fps / data.frame_step): m/s = m/sample x this
@@ -102,14 +103,16 @@ def stride_speed_slope(log_speed_by_style: list[np.ndarray], log_stride_by_style
 
 def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLayout,
                  sample_hz: float) -> GaitTargets:
-    """Each style's median speed and its stride there, the stride–speed slope within styles
-    (`stride_speed_slope`) and the contact height, measured on real clips without annotation;
+    """Each style's median speed and its stride there, its median step height, the stride–speed
+    slope within styles (`stride_speed_slope`) and the contact height, measured on real clips without annotation;
     `sample_hz` is the network's samples per second. A style none of whose clips shows a step
     frequency is an error."""
     toes = foot_joints(layout)
     by_style: dict[str, list[tuple[float, float]]] = {s: [] for s in style_names}
+    heights_by_style: dict[str, list[float]] = {s: [] for s in style_names}
     for clip in clips:
         by_style[clip.label.style].append(clip_speed_and_stride(clip, layout, toes))
+        heights_by_style[clip.label.style].append(gait.step_amplitude_m(clip_toe_heights(clip, layout, toes)))
     log_speeds, log_strides = [], []
     for style in style_names:
         vals = np.array([v for v in by_style[style] if np.all(np.isfinite(v))], np.float64).reshape(-1, 2)
@@ -123,5 +126,6 @@ def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLay
         centre = float(np.median(x))
         speeds.append(float(np.exp(centre)))
         strides.append(float(np.exp(np.median(y - slope * (x - centre)))))  # at the median speed
-    return GaitTargets(tuple(strides), tuple(speeds), slope, float(sample_hz), contact_height(clips, layout, toes),
-                       toes)
+    step_heights = tuple(float(np.median(heights_by_style[style])) for style in style_names)
+    return GaitTargets(tuple(strides), tuple(speeds), step_heights, slope, float(sample_hz),
+                       contact_height(clips, layout, toes), toes)

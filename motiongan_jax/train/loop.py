@@ -118,7 +118,8 @@ def make_step_fn(cfg: Config, dataset, log=print):
         log(f"gait targets from the training clips: contact height {gait.contact_height_m * 100:.1f} cm; stride "
             + ", ".join(f"{n} {v:.2f} m at {s:.2f} m/s" for n, v, s in
                         zip(dataset.style_names, gait.stride_m_C, gait.speed_mps_C))
-            + f"; log stride rises {gait.stride_speed_slope:.2f} x log speed within styles")
+            + f"; log stride rises {gait.stride_speed_slope:.2f} x log speed within styles; step height "
+            + ", ".join(f"{n} {h * 100:.1f} cm" for n, h in zip(dataset.style_names, gait.step_height_m_C)))
     return step_lib.make_train_step(cfg, dataset.layout, dataset.num_styles, gait)
 
 

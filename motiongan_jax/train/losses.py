@@ -143,6 +143,24 @@ def foot_losses(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, toe_joints, co
     return {"floor": jnp.mean(jnp.square(lift_BxT)), "skate": jnp.mean(contact_BxTm1xK * step_BxTm1xK)}
 
 
+# A window whose toes never part (a float, a glide) has step height 0: its log (and the square
+# root's gradient) is taken as if its variance had this standard deviation added.
+STEP_HEIGHT_FLOOR_M = 1e-3
+
+
+def step_height_loss(root_vel_BxTx3: jax.Array, pose_BxTxR: jax.Array, labels_B: jax.Array, toe_joints,
+                     step_height_m_C) -> jax.Array:
+    """Mean over windows of (log h_b − log h*_c)²: h_b the standard deviation over the window of its
+    left − right toe height (gait.step_amplitude_m's measure), h*_c the real clips' step height of
+    the window's style (data.GaitTargets.step_height_m_C). In log, so that a shuffle 2 cm too high
+    costs what a march 8 cm too high does; a ratio has no unit."""
+    heights_BxTx2 = world_joints(root_vel_BxTx3, pose_BxTxR)[:, :, np.asarray(toe_joints), 1]
+    diff_BxT = heights_BxTx2[..., 0] - heights_BxTx2[..., 1]
+    var_B = jnp.mean(jnp.square(diff_BxT - jnp.mean(diff_BxT, axis=1, keepdims=True)), axis=1)
+    target_B = jnp.log(jnp.asarray(step_height_m_C, jnp.float32))[labels_B]
+    return jnp.mean(jnp.square(0.5 * jnp.log(var_B + STEP_HEIGHT_FLOOR_M**2) - target_B))
+
+
 def root_jerk_excess(fake_vel_BxTx3: jax.Array, real_vel_BxTx3: jax.Array, unit: float = 1.0) -> jax.Array:
     """max(0, E‖Δ²v_fake‖² − E‖Δ²v_real‖²) in `unit`s², over every window and sample: the root's
     jerk (second difference of its velocity) may be as large as the real batch's, not larger."""

@@ -41,7 +41,7 @@ def d_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3, 
 
 # G's loss terms and their weights: train.w_g_<name>. The first four are the paper's, always
 # computed; the others only when their weight is not 0. The total adds them in this order.
-G_TERMS = ("adv", "cls", "curve", "bone", "floor", "skate", "root_jerk", "joint_jerk", "stride", "rec")
+G_TERMS = ("adv", "cls", "curve", "bone", "floor", "skate", "step_height", "root_jerk", "joint_jerk", "stride", "rec")
 PAPER_G_TERMS = G_TERMS[:4]
 
 
@@ -71,6 +71,9 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, b
         feet = losses.foot_losses(fake_vel_BxTx3, fake_pose_BxTxR, gait.toe_joints, gait.contact_height_m,
                                   length_unit)
         terms.update(floor=feet["floor"], skate=feet["skate"])
+    if "step_height" in active:
+        terms["step_height"] = losses.step_height_loss(fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, gait.toe_joints,
+                                                       gait.step_height_m_C)
     if "root_jerk" in active:
         terms["root_jerk"] = losses.root_jerk_excess(fake_vel_BxTx3, real_vel_BxTx3, length_unit)
     if "joint_jerk" in active:

@@ -56,7 +56,7 @@ def check_batch(batch: dict, num_rows: int, rec: bool = False) -> None:
 
 def needs_gait_targets(train_cfg) -> bool:
     """Whether the config's G loss has a term that reads data.GaitTargets."""
-    return bool(train_cfg.w_g_stride or train_cfg.w_g_floor or train_cfg.w_g_skate)
+    return bool(train_cfg.w_g_stride or train_cfg.w_g_floor or train_cfg.w_g_skate or train_cfg.w_g_step_height)
 
 
 def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
@@ -69,7 +69,8 @@ def make_train_step(cfg, layout, num_styles: int, gait=None) -> Callable:
     """
     tcfg = cfg.train
     if needs_gait_targets(tcfg) and gait is None:
-        raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate) need gait targets")
+        raise ValueError("the gait loss terms (train.w_g_stride, w_g_floor, w_g_skate, w_g_step_height) "
+                         "need gait targets")
     if gait is not None and not len(gait.stride_m_C) == len(gait.speed_mps_C) == num_styles:
         raise ValueError(f"gait targets have {len(gait.stride_m_C)} stride lengths and {len(gait.speed_mps_C)} "
                          f"speeds for {num_styles} styles")
