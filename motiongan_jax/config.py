@@ -97,8 +97,9 @@ class WalkerConfig:
     # G keeps a clock in walked distance at a learned per-style stride and sees its phase (RESULTS §10).
     gait_phase: bool = True
     # G's stride follows the walking speed as the data's does (log stride linear in log speed at
-    # the slope fitted within styles; off: one stride per style whatever the speed). Needs gait_phase.
-    stride_speed: bool = False
+    # the slope fitted within styles; off: one stride per style whatever the speed; RESULTS §24).
+    # Needs gait_phase.
+    stride_speed: bool = True
     # G's root head gives the root's height, not its vertical velocity: no drift off the floor.
     root_height: bool = True
 
@@ -368,9 +369,9 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
 # Saved configs: the one map from older schemas to this one
 # ---------------------------------------------------------------------------------------------
 
-# The saved form's schema: 2 since model.walker (Dec 7); configs saved before carry no number and
-# are schema 1. `upgrade` reads every schema from OLDEST_SCHEMA on.
-SCHEMA = 2
+# The saved form's schema: 2 since model.walker, 3 since walker.stride_speed on by default (Dec 7);
+# configs saved before model.walker carry no number and are schema 1. `upgrade` reads every schema from OLDEST_SCHEMA on.
+SCHEMA = 3
 OLDEST_SCHEMA = 1
 
 # Options that no longer exist, with the only value any preset used: a saved config holding that
@@ -435,6 +436,9 @@ def upgrade(d: dict) -> dict:
     if any(name in model for name in WALKER_FIELDS):
         parts = {**WALKER_OFF, **{new: model.pop(old) for old, new in WALKER_FIELDS.items() if old in model}}
         model["walker"] = None if parts == WALKER_OFF else parts
+    if schema < 3 and isinstance(model.get("walker"), dict):
+        # Schema 3 turned stride_speed on by default; a walker saved before it had no such part.
+        model["walker"].setdefault("stride_speed", False)
     return out
 
 
