@@ -359,6 +359,8 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
     need(t.w_g_stride == 0 or m.gait_phase, "train.w_g_stride",
          "needs model.walker.gait_phase (a stride head to train)")
     need(t.w_g_rec == 0 or m.gait_phase, "train.w_g_rec", "needs model.walker.gait_phase (a phase to reconstruct at)")
+    need(m.walker is None or not m.walker.stride_speed or m.walker.gait_phase, "model.walker.stride_speed",
+         "needs model.walker.gait_phase (a stride head to follow the speed)")
     need(t.w_g_rec == 0 or t.batch_size >= 2, "train.w_g_rec", "needs train.batch_size >= 2 (half is reconstructed)")
     need(t.rec_z == "zero" or t.w_g_rec > 0, "train.rec_z", "needs train.w_g_rec > 0 (a half to reconstruct)")
     need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")

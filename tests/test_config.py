@@ -1,3 +1,4 @@
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -76,6 +77,7 @@ def test_override_types_and_errors():
     ("train.w_g_skate=-1.0", "train.w_g_skate"),
     ("train.w_g_stride=1.0", "train.w_g_stride"),  # needs model.gait_phase
     ("train.w_g_rec=1.0", "train.w_g_rec"),  # likewise
+    ("model.walker.gait_phase=false", "model.walker.stride_speed"),  # a walker whose stride follows speed
     ("train.g_ema_decay=1.0", "train.g_ema_decay"),
     ("train.g_ema_decay=-0.1", "train.g_ema_decay"),
 ])
@@ -128,7 +130,7 @@ def test_presets_are_the_config_files_and_differ_from_the_paper_only_where_docum
     assert paper == C.ModelConfig(base_channels=64, time_kernel=5, w_dim=64, z_dim=64)
     assert small.walker == C.WalkerConfig() and (small.d_cond, small.latent_init) == (True, "torch_default")
     assert (small.walker.output_prior, small.walker.exact_bones, small.walker.gait_phase, small.walker.root_height,
-            small.walker.frame) == (True, True, True, True, "curve")
+            small.walker.stride_speed, small.walker.frame) == (True, True, True, True, True, "curve")
     assert C.bandai_small().model == small and C.bandai_small().data.frame_nums == 64
     with pytest.raises(C.ConfigError, match="unknown preset 'cpu'"):
         C.preset("cpu")
@@ -160,7 +162,7 @@ def test_a_run_config_written_before_the_compute_section_loads_as_the_small_pres
     cfg = C.from_dict(old)
     # fields added since take the values that keep the run's behaviour, not the preset's new ones
     assert cfg == C.override(C.small(), ["train.num_steps=300", "train.w_g_root_jerk=0", "train.w_g_joint_jerk=0",
-                                        "train.rec_z=zero"])
+                                        "train.rec_z=zero", "model.walker.stride_speed=false"])
     assert C.to_dict(C.from_dict(C.to_dict(cfg))) == C.to_dict(cfg)  # the new schema round-trips
     # the saved hash is the old dict's; the same config in the new schema hashes differently
     assert meta["config_hash"] == C.config_hash(old) != C.config_hash(cfg)
@@ -180,20 +182,26 @@ def test_a_run_config_written_before_the_compute_section_loads_as_the_small_pres
 
 def test_saved_configs_carry_their_schema_and_older_ones_load():
     """to_dict writes the schema number; a config without one is schema 1 (saved before
-    model.walker): its flat walker fields load as model.walker; an unknown schema is refused."""
+    model.walker): its flat walker fields load as model.walker; a walker saved before schema 3 has
+    no stride that follows speed (then off by default); an unknown schema is refused."""
     small = C.small()
     d = C.to_dict(small)
-    assert d["schema"] == C.SCHEMA == 2 and C.OLDEST_SCHEMA == 1
+    assert d["schema"] == C.SCHEMA == 3 and C.OLDEST_SCHEMA == 1
+    one_stride = dataclasses.replace(small, model=dataclasses.replace(
+        small.model, walker=dataclasses.replace(small.model.walker, stride_speed=False)))
+    two = {**d, "schema": 2, "model": {**d["model"], "walker": {k: v for k, v in d["model"]["walker"].items()
+                                                                 if k != "stride_speed"}}}
+    assert C.from_dict(two) == one_stride and C.from_dict(d) == small
     old = {k: v for k, v in d.items() if k != "schema"}
     old["model"] = {**{k: v for k, v in d["model"].items() if k != "walker"},
                     "output_prior": True, "g_frame": "curve", "exact_bones": True, "gait_phase": True,
                     "root_height": True}
-    assert C.from_dict(old) == small
+    assert C.from_dict(old) == one_stride
     paper = {k: v for k, v in C.to_dict(C.tiny()).items() if k != "schema"}
     paper["model"] = {**{k: v for k, v in paper["model"].items() if k != "walker"}, "g_frame": "world"}
     assert C.from_dict(paper).model.walker is None
-    for bad in (3, "2", 0):
-        with pytest.raises(C.ConfigError, match="schemas 1 to 2"):
+    for bad in (4, "2", 0):
+        with pytest.raises(C.ConfigError, match="schemas 1 to 3"):
             C.from_dict({**d, "schema": bad})
     with pytest.raises(C.ConfigError, match="unknown config entries: extra"):
         C.from_dict({**d, "extra": 1})

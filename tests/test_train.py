@@ -196,7 +196,7 @@ def test_compute_only_fields_do_not_make_a_checkpoint_incompatible(tiny):
                                 {"model": to_dict(tiny)["model"]}, "here")
     framed = to_dict(override(tiny, ["model.walker=default", "model.walker.output_prior=false",
                                      "model.walker.exact_bones=false", "model.walker.gait_phase=false",
-                                     "model.walker.root_height=false"]))["model"]
+                                     "model.walker.root_height=false", "model.walker.stride_speed=false"]))["model"]
     checkpoint.check_compatible({"model": {**older, "g_frame": "curve"}}, {"model": framed}, "here")
     with pytest.raises(checkpoint.CheckpointError, match="its model is"):
         checkpoint.check_compatible({"model": {**older, "g_frame": "world"}}, {"model": framed}, "here")
