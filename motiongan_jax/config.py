@@ -372,7 +372,8 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
 # ---------------------------------------------------------------------------------------------
 
 # The saved form's schema: 2 since model.walker, 3 since walker.stride_speed on by default (Dec 7);
-# configs saved before model.walker carry no number and are schema 1. `upgrade` reads every schema from OLDEST_SCHEMA on.
+# configs saved before model.walker carry no number and are schema 1. `upgrade` reads every
+# schema from OLDEST_SCHEMA on.
 SCHEMA = 3
 OLDEST_SCHEMA = 1
 
