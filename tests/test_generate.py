@@ -309,11 +309,12 @@ def gait_model(repo):
     rest-pose prior and the curve frame (a G whose outputs look like a body following the curve;
     the random parameters of `run` make a chaotic G whose outputs depend on every statistic). Its
     stride head is set so that Sad and Happy stride 0.8 m and 1.4 m (at initialisation every
-    stride is 1 m)."""
+    stride is 1 m; one stride per style, walker.stride_speed off, so that a stride set by hand is the
+    stride G walks at every speed)."""
     from flax import nnx
 
     cfg = override(load_config(repo / "configs" / "tiny.py"),
-                   ["model.walker=default", "model.walker.exact_bones=false"])
+                   ["model.walker=default", "model.walker.exact_bones=false", "model.walker.stride_speed=false"])
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     state = train_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
     from motiongan_jax.nn.walker import STRIDE_GAIN
