@@ -26,8 +26,8 @@ from bench.bench_train_step import paper_or_small
 from bench.timing import load
 from motiongan_jax.generate import walk as walk_lib
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import state as model_state
 from motiongan_jax.motion import trajectory
-from motiongan_jax.train import state as train_state
 
 REFERENCE_S = {128: 0.084, 1024: 0.62}
 GOAL_S = {128: 0.030, 1024: 0.2}
@@ -50,7 +50,7 @@ def main():
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; paper G, batch 1; {load()}")
     labels = jnp.array([3], jnp.int32)
     for impl in args.impl.split(","):
-        state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
+        state = model_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl)
         for T in (int(t) for t in args.lengths.split(",")):
             curve = walk(T)
             vel = trajectory.velocity(curve)

@@ -31,8 +31,8 @@ from bench.bench_data import long_clips
 from bench.timing import load, median_time
 from motiongan_jax.config import load_config, override
 from motiongan_jax.data import clip_cache, sampling
+from motiongan_jax.model import state as model_state
 from motiongan_jax.train import objectives
-from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 from motiongan_jax.train.loop import make_step_fn
 
@@ -89,7 +89,7 @@ def main():
 
         fused = jax.jit(fused_fn, donate_argnums=(0, 1))
         sample_s = median_time(sample, arrays, k_data, 0, repeats=20)
-        holder = {"state": train_state.init_state(cfg, layout, num_styles, jax.random.key(0)), "s": 0}
+        holder = {"state": model_state.init_state(cfg, layout, num_styles, jax.random.key(0)), "s": 0}
         fixed_batch = sample(arrays, k_data, 0)
 
         def run(n, step_once):

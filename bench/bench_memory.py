@@ -28,9 +28,9 @@ CHILD = r"""
 import jax
 from bench.bench_train_step import bench_step_fn, fake_batch, paper_or_small
 from motiongan_jax.train import objectives
-from motiongan_jax.train import state as train_state
+from motiongan_jax.model import state as model_state
 cfg, layout, num_styles = paper_or_small({which!r})
-state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl={impl!r})
+state = model_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl={impl!r})
 step = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
 batch = fake_batch(cfg.train.batch_size, cfg.data.window_T, layout.num_rows, num_styles, jax.random.key(1),
                    objectives.reconstructed_rows(cfg.train))

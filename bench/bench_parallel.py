@@ -36,8 +36,8 @@ def child(args) -> None:
     from bench.timing import load
     from motiongan_jax.config import load_config, override
     from motiongan_jax.data import clip_cache, sampling
+    from motiongan_jax.model import state as model_state
     from motiongan_jax.train import objectives, parallel
-    from motiongan_jax.train import state as train_state
     from motiongan_jax.train.loop import make_step_fn
 
     cfg = override(load_config(ROOT / "configs" / f"{args.which}.py"), args.set)
@@ -50,7 +50,7 @@ def child(args) -> None:
         return step_fn(state, batch, jax.random.fold_in(key, s))
 
     sample = jax.jit(sampling.make_sample_batch(cfg.data, B, objectives.reconstructed_rows(cfg.train)))
-    state = train_state.init_state(cfg, dataset.layout, dataset.num_styles, jax.random.key(0))
+    state = model_state.init_state(cfg, dataset.layout, dataset.num_styles, jax.random.key(0))
     k_data, key = jax.random.key(1), jax.random.key(2)
     if jax.device_count() > 1:
         mesh = parallel.data_mesh()

@@ -40,12 +40,12 @@ from bench.bench_train_step import (
     stand_in_gait,
 )
 from bench.timing import load, median_time
+from motiongan_jax.model import state as model_state
 from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.nn.generator import Generator
 from motiongan_jax.train import objectives
-from motiongan_jax.train import state as train_state
 
 SCOPES = Generator.BLOCKS + ("heads", "D")
 
@@ -79,7 +79,7 @@ def pieces(cfg, layout, num_styles, state, batch, repeats):
             return terms["d_total"], nnx.state(d, SpectralNormState)
 
         (_, sn), grads = jax.value_and_grad(obj, has_aux=True)(d_params)
-        tx_d = train_state.optimizers(cfg)[1]
+        tx_d = model_state.optimizers(cfg)[1]
         upd, opt_d = tx_d.update(grads, opt_d, d_params)
         return optax.apply_updates(d_params, upd), sn, opt_d
 
@@ -158,7 +158,7 @@ def main():
     cfg, layout, num_styles = paper_or_small(args.which)
     B, T = cfg.train.batch_size, cfg.data.window_T
     print(f"jax {jax.__version__}, {os.cpu_count()} cpus; {args.which}: B {B}, T {T}, impl {args.impl}; {load()}")
-    state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=args.impl)
+    state = model_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=args.impl)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1), objectives.reconstructed_rows(cfg.train))
 
     if not args.no_pieces:

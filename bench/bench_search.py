@@ -36,7 +36,7 @@ def main():
 
     from motiongan_jax.analysis import clips, search, style_space
     from motiongan_jax.data import synthetic
-    from motiongan_jax.train import pretrained
+    from motiongan_jax.model import pretrained
 
     t0 = time.perf_counter()
     state, meta, cfg, layout = pretrained.load_model(args.workdir, model=args.model)

@@ -30,9 +30,9 @@ import jax.numpy as jnp
 from bench.timing import load
 from motiongan_jax.config import load_config, override
 from motiongan_jax.data import gait_stats, synthetic
+from motiongan_jax.model import state as model_state
 from motiongan_jax.motion.representation import CMU_UNIT_M, foot_joints, layout_from_skeleton
 from motiongan_jax.train import objectives
-from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
@@ -91,7 +91,7 @@ def peak_device_memory() -> str:
 
 def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
     B, T = cfg.train.batch_size, cfg.data.window_T
-    state = train_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
+    state = model_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
     step_fn = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
     batch = fake_batch(B, T, layout.num_rows, num_styles, jax.random.key(1), objectives.reconstructed_rows(cfg.train))
     t0 = time.perf_counter()

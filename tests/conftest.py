@@ -122,15 +122,15 @@ def random_run(cfg, wd, step: int = 4, seed: int = 0, data_dir: str = "<test>"):
     import numpy as np
 
     from motiongan_jax.data import synthetic
+    from motiongan_jax.model import checkpoint
+    from motiongan_jax.model import state as model_state
     from motiongan_jax.motion import representation
-    from motiongan_jax.train import checkpoint
     from motiongan_jax.train import loop as train_lib
-    from motiongan_jax.train import state as train_state
 
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
     styles = tuple(sorted(synthetic.STYLES))
     dataset = types.SimpleNamespace(style_names=styles, layout=layout, fps=60.0, data_dir=data_dir)
-    like = jax.eval_shape(lambda: train_state.init_state(cfg, layout, len(styles), jax.random.key(0)))
+    like = jax.eval_shape(lambda: model_state.init_state(cfg, layout, len(styles), jax.random.key(0)))
     rng = np.random.default_rng(seed)
     state = jax.tree.map(lambda s: rng.normal(0, 0.3, s.shape).astype(s.dtype)
                          if np.issubdtype(s.dtype, np.floating) else np.zeros(s.shape, s.dtype), like)

@@ -29,8 +29,8 @@ from motiongan_jax.generate import styles as styles_lib
 from motiongan_jax.generate import user_curves
 from motiongan_jax.generate import walk as walk_lib
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import checkpoint, pretrained
 from motiongan_jax.motion import bvh, kinematics, representation, trajectory
-from motiongan_jax.train import checkpoint, pretrained
 
 
 @pytest.fixture(scope="module")

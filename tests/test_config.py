@@ -154,7 +154,7 @@ def test_a_run_config_written_before_the_compute_section_loads_as_the_small_pres
     and the rename of cpu to small (with use_z, d_frame and length_unit still in it)."""
     import json
 
-    from motiongan_jax.train import checkpoint
+    from motiongan_jax.model import checkpoint
 
     meta = json.loads((FIXTURES / "run_config_cpu_before_presets.json").read_text())
     old = meta["config"]

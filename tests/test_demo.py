@@ -24,8 +24,8 @@ from motiongan_jax.demo import server  # noqa: E402
 from motiongan_jax.generate import limits, user_curves, walk, writers
 from motiongan_jax.generate import styles as styles_lib
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import checkpoint  # noqa: E402
 from motiongan_jax.motion import bvh  # noqa: E402
-from motiongan_jax.train import checkpoint  # noqa: E402
 
 RATE = 15.0
 SPEED = 1.2

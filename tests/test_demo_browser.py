@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from motiongan_jax.generate import styles
+from motiongan_jax.model import pretrained
 from motiongan_jax.motion import bvh
-from motiongan_jax.train import pretrained
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--no-sandbox", "--headless", "--disable-gpu", "--disable-background-networking",

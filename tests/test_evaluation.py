@@ -19,8 +19,8 @@ from conftest import load_cli
 
 from motiongan_jax.data import curves, synthetic
 from motiongan_jax.evaluation import clip_metrics, eval_curves, evaluator
+from motiongan_jax.model import checkpoint
 from motiongan_jax.motion import gait, representation, trajectory
-from motiongan_jax.train import checkpoint
 
 # ---------------------------------------------------------------------------------------------
 # canonicalisation

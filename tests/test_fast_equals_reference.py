@@ -29,8 +29,8 @@ from conftest import FAST, compiled_call
 from flax import nnx
 
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
+from motiongan_jax.model import state as model_state
 from motiongan_jax.nn import Discriminator, Generator, conv, layers
-from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
 
@@ -276,7 +276,7 @@ def _one_step(impl: str, dtype: str):
     from test_step import LAYOUT, C  # the step tests' skeleton stand-in (27 joints)
 
     batch, key = _curvy_batch(2, STEP_T, LAYOUT.num_rows, jax.random.key(42)), jax.random.key(7)
-    state = train_state.init_state(STEP_CFG, LAYOUT, C, jax.random.key(0), impl=impl, dtype=dtype)
+    state = model_state.init_state(STEP_CFG, LAYOUT, C, jax.random.key(0), impl=impl, dtype=dtype)
     step = jax.jit(step_lib.make_train_step(STEP_CFG, LAYOUT, C)).lower(state, batch, key).compile(
         compiler_options=FAST)
     return step(state, batch, key)
@@ -351,6 +351,6 @@ def test_step_runs_g_once_and_d_three_times(monkeypatch):
 
     monkeypatch.setattr(Generator, "network", counting_g)
     monkeypatch.setattr(Discriminator, "__call__", counting_d)
-    state = jax.eval_shape(lambda: train_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
+    state = jax.eval_shape(lambda: model_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
     jax.eval_shape(step_lib.make_train_step(CFG, LAYOUT, C), state, _batch(), jax.random.key(1))
     assert calls == {"G": 1, "D": 3}

@@ -23,9 +23,9 @@ from motiongan_jax.config import load_config, override, to_dict
 from motiongan_jax.data import curves, synthetic
 from motiongan_jax.generate import limits, styles, user_curves, walk, writers
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import checkpoint, pretrained
+from motiongan_jax.model import state as model_state
 from motiongan_jax.motion import bvh, ik, kinematics, representation, trajectory
-from motiongan_jax.train import checkpoint, pretrained
-from motiongan_jax.train import state as train_state
 
 T_LONG = 96
 SPEED = 1.2
@@ -316,7 +316,7 @@ def gait_model(repo):
     cfg = override(load_config(repo / "configs" / "tiny.py"),
                    ["model.walker=default", "model.walker.exact_bones=false", "model.walker.stride_speed=false"])
     layout = representation.layout_from_skeleton(synthetic.cmu_skeleton(), synthetic.UNITS_TO_M)
-    state = train_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
+    state = model_state.init_state(cfg, layout, len(NAMES), jax.random.key(0))
     from motiongan_jax.nn.walker import STRIDE_GAIN
 
     g = model_apply.generator(state)

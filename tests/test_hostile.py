@@ -30,7 +30,7 @@ from motiongan_jax.demo import server  # noqa: E402
 from motiongan_jax.generate import limits  # noqa: E402
 from motiongan_jax.generate import styles as styles_lib  # noqa: E402
 from motiongan_jax.model import apply as model_apply  # noqa: E402
-from motiongan_jax.train import checkpoint  # noqa: E402
+from motiongan_jax.model import checkpoint  # noqa: E402
 
 NAMES = ["Childish", "Drunk", "Happy", "Marching", "Normal", "OldMan", "Sad", "Sneaky", "Strong"]
 LINE32 = [[0.0, 0.0], [31.5 * 1.2 / 15.0, 0.0]]  # 32 samples at 1.2 m/s and 15 Hz: test_demo's bucket

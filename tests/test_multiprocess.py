@@ -17,7 +17,7 @@ import time
 
 from conftest import assert_bit_identical
 
-from motiongan_jax.train import checkpoint
+from motiongan_jax.model import checkpoint
 
 # runs bin/train.py with an audit hook that records, on a descriptor opened before it, every
 # path under the workdir (outside checkpoints/) that the process opens for writing, creates,

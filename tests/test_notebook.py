@@ -92,7 +92,7 @@ def test_notebook_runs_end_to_end_on_the_shipped_model(tmp_path, monkeypatch):
 
     # the fallback loaded the shipped model
     from motiongan_jax.config import from_dict
-    from motiongan_jax.train import pretrained
+    from motiongan_jax.model import pretrained
 
     shipped = pretrained.read_export(pretrained.SHIPPED_MODEL)
     assert ns["WORKDIR"] is None and ns["cfg"].name == "small" == from_dict(shipped.meta["config"]).name

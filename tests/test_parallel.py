@@ -7,7 +7,8 @@ import textwrap
 
 SCRIPT = textwrap.dedent("""
     import jax, jax.numpy as jnp, numpy as np
-    from motiongan_jax.train import parallel, state as train_state, step as step_lib
+    from motiongan_jax.train import parallel, step as step_lib
+    from motiongan_jax.model import state as model_state
     from motiongan_jax.config import load_config, override
     from motiongan_jax.motion.representation import layout_from_parents
 
@@ -21,9 +22,9 @@ SCRIPT = textwrap.dedent("""
     batch = {{"root_BxTx3": root, "pose_BxTxR": 0.3 * jax.random.normal(k[1], (8, T, 3 * (J - 1))),
              "curve_BxTx3": root.at[..., 1].set(0.0), "label_B": jax.random.randint(k[2], (8,), 0, 3)}}
     fn = step_lib.make_train_step(cfg, layout, 3)
-    single = train_state.init_state(cfg, layout, 3, jax.random.key(1))
+    single = model_state.init_state(cfg, layout, 3, jax.random.key(1))
     mesh = parallel.data_mesh()
-    sharded = parallel.put_state(train_state.init_state(cfg, layout, 3, jax.random.key(1)), mesh)
+    sharded = parallel.put_state(model_state.init_state(cfg, layout, 3, jax.random.key(1)), mesh)
     one, many = jax.jit(fn), parallel.shard_step(fn, mesh, 8)
     sb = parallel.global_batch(batch, mesh)
     assert len(sb["pose_BxTxR"].sharding.device_set) == 4

@@ -1,4 +1,4 @@
-"""Inference exports (motiongan_jax/train/pretrained.py, bin/export_model.py) and the shipped model.
+"""Inference exports (motiongan_jax/model/pretrained.py, bin/export_model.py) and the shipped model.
 
 Exports are made from checkpoints of the tiny config with seeded random parameters (conftest's random_run),
 with a moving average unlike the trained parameters, so a test can tell which set was exported.
@@ -18,8 +18,8 @@ from conftest import load_cli, random_run, run_cli
 from motiongan_jax.config import config_hash, from_dict, load_config, override
 from motiongan_jax.data import curves
 from motiongan_jax.generate import styles, user_curves, walk
+from motiongan_jax.model import checkpoint, pretrained
 from motiongan_jax.motion import bvh
-from motiongan_jax.train import checkpoint, pretrained
 
 SPEED = 1.2
 

@@ -17,10 +17,10 @@ from flax import nnx
 from motiongan_jax.config import Config, DataConfig, ModelConfig, TrainConfig, validate
 from motiongan_jax.model import apply as model_apply
 from motiongan_jax.model import build as model_build
+from motiongan_jax.model import state as model_state
 from motiongan_jax.motion import trajectory
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.train import objectives
-from motiongan_jax.train import state as train_state
 from motiongan_jax.train import step as step_lib
 
 J, T, B, C = 27, 16, 2, 4
@@ -64,7 +64,7 @@ def _leaves_equal(a, b) -> bool:
 
 @pytest.fixture(scope="module")
 def setup():
-    state0 = train_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
+    state0 = model_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
     batch = _batch()
     key = jax.random.key(7)
     step = jax.jit(step_lib.make_train_step(CFG, LAYOUT, C)).lower(state0, batch, key).compile(
@@ -126,16 +126,16 @@ def test_same_key_is_bit_identical_and_pure(setup):
 
 
 def test_init_is_reproducible(setup):
-    same = train_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
+    same = model_state.init_state(CFG, LAYOUT, C, jax.random.key(0))
     assert _leaves_equal(same, setup["state0"])
-    other = train_state.init_state(CFG, LAYOUT, C, jax.random.key(1))
+    other = model_state.init_state(CFG, LAYOUT, C, jax.random.key(1))
     assert not _leaves_equal(other.g_params, setup["state0"].g_params)
     assert not _leaves_equal(other.d_sn_state, setup["state0"].d_sn_state)
 
 
 def test_abstract_init_matches(setup):
     # checkpoint restore builds its target with jax.eval_shape(init_state)
-    like = jax.eval_shape(lambda: train_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
+    like = jax.eval_shape(lambda: model_state.init_state(CFG, LAYOUT, C, jax.random.key(0)))
     assert jax.tree_util.tree_structure(like) == jax.tree_util.tree_structure(setup["state0"])
     g, d = nnx.eval_shape(lambda: model_build.build_models(CFG, J, C, jax.random.key(0)))
     n_g = sum(x.size for x in jax.tree_util.tree_leaves(setup["state0"].g_params))
@@ -326,7 +326,7 @@ def projection_ema():
     plain_cfg = validate(dataclasses.replace(CFG, model=dataclasses.replace(CFG.model, base_channels=4)))
     cfg = validate(dataclasses.replace(plain_cfg, model=dataclasses.replace(plain_cfg.model, d_cond=True),
                                        train=dataclasses.replace(plain_cfg.train, g_ema_decay=EMA_DECAY)))
-    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    state0 = model_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
     step = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C)).lower(state0, _batch(), jax.random.key(1)).compile(
         compiler_options=FAST)
     return plain_cfg, cfg, state0, step
@@ -543,7 +543,7 @@ def _gait_step(rec_z: str):
     batch = {**_batch(), "phase_BxT": jnp.tile(0.4 * jnp.arange(T, dtype=jnp.float32), (B, 1)),
              "phase_valid_BxT": jnp.arange(T)[None, :].repeat(B, 0) >= 2,
              "rec_B": jnp.arange(B) < objectives.reconstructed_rows(cfg.train)}
-    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    state0 = model_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
     # at init w barely depends on z: a larger latent transform lets the two choices differ
     g_params = jax.tree.map(lambda x: x, state0.g_params)
     g_params["latent"] = jax.tree.map(lambda x: 10.0 * x, g_params["latent"])
@@ -637,7 +637,7 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
     decay = EMA_DECAY
     _, cfg, state0, step = projection_ema
     no_average = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, g_ema_decay=0.0))
-    assert train_state.init_state(no_average, LAYOUT, C, jax.random.key(0)).g_ema_params is None
+    assert model_state.init_state(no_average, LAYOUT, C, jax.random.key(0)).g_ema_params is None
     assert _leaves_equal(state0.g_ema_params, state0.g_params)
     # (that the average never feeds back, training being that of a run without it, is checked bit
     # for bit through the training loop: tests/test_train.py's resume test)
@@ -654,11 +654,11 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
         np.testing.assert_allclose(np.asarray(got), exp, rtol=1e-6, atol=1e-7)
     assert not _leaves_equal(state.g_ema_params, state.g_params)
     # generation takes the average unless asked for the raw parameters
-    assert _leaves_equal(train_state.inference_state(state).g_params, state.g_ema_params)
-    assert _leaves_equal(train_state.inference_state(state, "raw").g_params, state.g_params)
-    assert train_state.inference_state(plain) is plain
+    assert _leaves_equal(model_state.inference_state(state).g_params, state.g_ema_params)
+    assert _leaves_equal(model_state.inference_state(state, "raw").g_params, state.g_params)
+    assert model_state.inference_state(plain) is plain
     with pytest.raises(ValueError, match="'ema' or 'raw'"):
-        train_state.inference_state(state, "average")
+        model_state.inference_state(state, "average")
     # a state and a step that disagree about the average are refused at trace time
     with pytest.raises(ValueError, match="g_ema_decay"):
         jax.eval_shape(step_lib.make_train_step(cfg, LAYOUT, C), plain, _batch(), jax.random.key(0))

@@ -13,7 +13,7 @@ import pytest
 
 from motiongan_jax.generate import stream, walk
 from motiongan_jax.model import apply as model_apply
-from motiongan_jax.train import pretrained
+from motiongan_jax.model import pretrained
 
 # stated tolerances of stream vs whole path (default HISTORY/LOOKAHEAD, a 1.5 m radius curve)
 TOL_ROOT_XZ_M = 0.05  # the root's floor position, any sample

@@ -21,8 +21,8 @@ from motiongan_jax.config import override, to_dict
 from motiongan_jax.data import sampling
 from motiongan_jax.generate.preview import preview_curve, previewer
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import checkpoint, health
 from motiongan_jax.motion import trajectory
-from motiongan_jax.train import checkpoint, health
 from motiongan_jax.train import loop as train_lib
 
 

@@ -21,7 +21,7 @@ from motiongan_jax.analysis import clips, style_space
 from motiongan_jax.analysis import probe as probe_lib
 from motiongan_jax.analysis import search as search_lib
 from motiongan_jax.data import curves
-from motiongan_jax.train import pretrained
+from motiongan_jax.model import pretrained
 
 
 @dataclasses.dataclass(frozen=True)

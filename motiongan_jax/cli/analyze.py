@@ -51,8 +51,8 @@ def main(argv=None) -> int:
     from motiongan_jax.analysis.report import Search, write_analysis
     from motiongan_jax.analysis.style_space import AnalysisError
     from motiongan_jax.data.curves import CurveFileError, DegenerateCurveError
+    from motiongan_jax.model.checkpoint import CheckpointError
     from motiongan_jax.motion.bvh import BVHError
-    from motiongan_jax.train.checkpoint import CheckpointError
 
     given = {k: v for k, v in (("steps", args.search_steps), ("keep", args.search_keep)) if v is not None}
     search = None if not args.search else Search(args.search, args.search_curve, **given)

@@ -69,8 +69,8 @@ def main(argv=None) -> int:
     from motiongan_jax.evaluation import evaluator, protocol, realism
     from motiongan_jax.evaluation import report as eval_report
     from motiongan_jax.generate import limits
+    from motiongan_jax.model import checkpoint
     from motiongan_jax.motion.bvh import BVHError
-    from motiongan_jax.train import checkpoint
 
     try:
         try:
@@ -115,8 +115,8 @@ def _search_only(args) -> int:
     from motiongan_jax.config import ConfigError
     from motiongan_jax.data import file_labels
     from motiongan_jax.evaluation import protocol, style_recovery
+    from motiongan_jax.model import checkpoint
     from motiongan_jax.motion.bvh import BVHError
-    from motiongan_jax.train import checkpoint
 
     settings = style_recovery.Settings(clips_per_style=args.search_clips,
                                        **({} if args.search_steps is None else {"steps": args.search_steps}))

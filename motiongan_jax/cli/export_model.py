@@ -1,5 +1,5 @@
 """Export a trained model for generation: G's parameters and the meta needed to use them, in one
-small .npz with its provenance and a checksum (motiongan_jax/train/pretrained.py).
+small .npz with its provenance and a checksum (motiongan_jax/model/pretrained.py).
 
   python bin/export_model.py --workdir runs/small --out model.npz [--step N] [--params ema|raw]
   python bin/export_model.py --info model.npz          # check a file and print its provenance
@@ -36,8 +36,8 @@ def main(argv=None) -> int:
     if args.out and not args.out.endswith(".npz"):
         ap.error(f"--out must end in .npz, got {args.out!r}")
 
-    from motiongan_jax.train import pretrained
-    from motiongan_jax.train.checkpoint import CheckpointError
+    from motiongan_jax.model import pretrained
+    from motiongan_jax.model.checkpoint import CheckpointError
 
     try:
         if args.info:

@@ -109,11 +109,11 @@ def main(argv=None) -> int:
     if not 0 <= args.seed <= limits.MAX_SEED:  # the demo's API takes the same seeds
         ap.error(f"--seed must be an integer 0..{limits.MAX_SEED}, got {args.seed}")
     from motiongan_jax.analysis.style_space import AnalysisError
+    from motiongan_jax.model import checkpoint, pretrained
     from motiongan_jax.motion import rigs
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.motion.gltf import GLTFError
     from motiongan_jax.motion.ik import IKError
-    from motiongan_jax.train import checkpoint, pretrained
 
     if args.rig is None and (args.rig_map or args.rig_units):
         ap.error("--rig-map and --rig-units go with --rig")

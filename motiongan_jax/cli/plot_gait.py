@@ -29,8 +29,8 @@ def main(argv=None) -> int:
     from motiongan_jax.data import clip_cache, file_labels, gait_stats
     from motiongan_jax.evaluation import clip_metrics
     from motiongan_jax.generate import limits, walk
+    from motiongan_jax.model import checkpoint
     from motiongan_jax.motion import representation
-    from motiongan_jax.train import checkpoint
 
     try:
         if not args.seconds > 0:

@@ -6,7 +6,7 @@
 import argparse
 import sys
 
-from motiongan_jax.train import health
+from motiongan_jax.model import health
 
 KEYS = ("d_total", "g_adv", "g_cls", "g_curve", "g_bone", "d_cls_acc_real", "g_cls_acc_fake")
 

@@ -24,8 +24,8 @@ def main(argv=None) -> int:
 
     from motiongan_jax.config import ConfigError, from_dict, validate
     from motiongan_jax.data.file_labels import DataError
-    from motiongan_jax.train import pretrained
-    from motiongan_jax.train.checkpoint import CheckpointError
+    from motiongan_jax.model import pretrained
+    from motiongan_jax.model.checkpoint import CheckpointError
     from motiongan_jax.train.loop import train
 
     try:

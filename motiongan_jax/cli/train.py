@@ -41,9 +41,9 @@ def main(argv=None) -> int:
 
     from motiongan_jax.config import ConfigError, load_config, override, validate
     from motiongan_jax.data.file_labels import DataError
+    from motiongan_jax.model.checkpoint import CheckpointError
     from motiongan_jax.motion.bvh import BVHError
     from motiongan_jax.train import parallel
-    from motiongan_jax.train.checkpoint import CheckpointError
 
     try:
         cfg = load_config(args.config, check=False)

@@ -209,7 +209,7 @@ def create_app(engine: engine_lib.Engine) -> Flask:
 
 
 def load_engine(workdir=None, model=None, step=None, params="ema") -> engine_lib.Engine:
-    from motiongan_jax.train import pretrained
+    from motiongan_jax.model import pretrained
 
     state, meta, cfg, layout = pretrained.load_model(workdir, step, params, model)
     if workdir is not None:
@@ -271,7 +271,7 @@ def main(argv=None) -> int:
         ap.error(f"--debug serves through Flask's development server, which is for this machine only: "
                  f"use --host 127.0.0.1, not {args.host}")
 
-    from motiongan_jax.train.checkpoint import CheckpointError
+    from motiongan_jax.model.checkpoint import CheckpointError
 
     use_compilation_cache()
     try:

@@ -35,8 +35,8 @@ from motiongan_jax.evaluation.eval_curves import (
 )
 from motiongan_jax.generate import styles, walk
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import checkpoint, pretrained
 from motiongan_jax.motion.representation import foot_joints, from_rows
-from motiongan_jax.train import checkpoint, pretrained
 
 
 class EvaluationError(ValueError):

@@ -11,8 +11,8 @@ import numpy as np
 from motiongan_jax.data import curves
 from motiongan_jax.generate import walk
 from motiongan_jax.model import apply as model_apply
+from motiongan_jax.model import state as model_state
 from motiongan_jax.motion import trajectory
-from motiongan_jax.train import state as train_state
 
 
 def preview_curve(T: int, spacing_m: float) -> np.ndarray:
@@ -27,7 +27,7 @@ def write_preview(path: Path, state, layout, style_names, curve_Tx3: np.ndarray,
     moving average when the run keeps one)."""
     from motiongan_jax import viz
 
-    state = train_state.inference_state(state)
+    state = model_state.inference_state(state)
     labels = np.linspace(0, len(style_names) - 1, min(num, len(style_names))).round().astype(np.int32)
     gen = walk.generate_motion(state, layout, curve_Tx3, model_apply.style_codes(state, jnp.asarray(labels)))
     return viz.animate_motions(list(gen.positions), layout.parents, [style_names[i] for i in labels], path,

@@ -26,8 +26,9 @@ import numpy as np
 from motiongan_jax import atomic
 from motiongan_jax.config import Config, config_hash, to_dict
 from motiongan_jax.data import clip_cache, file_labels, gait_stats, sampling
-from motiongan_jax.train import checkpoint, health, objectives, parallel
-from motiongan_jax.train import state as train_state
+from motiongan_jax.model import checkpoint, health
+from motiongan_jax.model import state as model_state
+from motiongan_jax.train import objectives, parallel
 from motiongan_jax.train import step as step_lib
 
 
@@ -146,7 +147,7 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print,
 
     arrays = sampling.build_arrays(dataset.train, dataset.style_names, cfg.data)
     k_init, k_data, k_step = keys(cfg.train.seed)
-    state = train_state.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
+    state = model_state.init_state(cfg, dataset.layout, dataset.num_styles, k_init)
     step_fn = make_step_fn(cfg, dataset, log)
 
     def keyed_step(state, batch, key, s):  # the step's key, fold_in(k_step, s), made on the device

@@ -30,11 +30,11 @@ from flax import nnx
 
 from motiongan_jax.config import GanLoss, choices
 from motiongan_jax.model.build import count_rel_joints
+from motiongan_jax.model.state import TrainState, optimizers
 from motiongan_jax.motion import trajectory
 from motiongan_jax.motion.representation import LENGTH_UNIT_M
 from motiongan_jax.nn import SpectralNormState
 from motiongan_jax.train.objectives import d_losses, g_losses, generator_inputs
-from motiongan_jax.train.state import TrainState, optimizers
 
 
 def check_batch(batch: dict, num_rows: int, rec: bool = False) -> None:

@@ -18,7 +18,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 
 from motiongan_jax.config import from_dict
-from motiongan_jax.train import health
+from motiongan_jax.model import health
 
 _log = logging.getLogger(__name__)
 
@@ -117,24 +117,24 @@ def load_run(workdir: str | Path, step: int | None = None, params: str = "ema"):
     """(state, meta, cfg, layout) of a training run's checkpoint, without its data: `step`, or by
     default the run's model (`resolve_step`). `params`: "ema" (default) puts G's moving average
     in `state.g_params` when the run keeps one (train.g_ema_decay > 0), "raw" leaves the trained
-    parameters (train.state.inference_state)."""
-    from motiongan_jax.train import state as train_state
+    parameters (model.state.inference_state)."""
+    from motiongan_jax.model import state as model_state
 
     mngr = run_manager(workdir)
     step, meta = _step_and_meta(mngr, workdir, step)
     cfg, layout, like = abstract_model(meta)
     state = restore(mngr, step, like)
-    return train_state.inference_state(state, params), meta, cfg, layout
+    return model_state.inference_state(state, params), meta, cfg, layout
 
 
 def abstract_model(meta: dict):
     """(cfg, layout, abstract train state) that a checkpoint's (or an export's) meta describes:
     the state's shapes and dtypes (jax.ShapeDtypeStruct leaves) and its graph definitions."""
+    from motiongan_jax.model import state as model_state
     from motiongan_jax.motion.representation import layout_from_parents
-    from motiongan_jax.train import state as train_state
 
     cfg = from_dict(meta["config"])
     layout = layout_from_parents(meta["joint_names"], meta["parents"], meta["bone_lengths_m"],
                                  meta.get("rest_offsets_m"))
-    like = jax.eval_shape(lambda: train_state.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
+    like = jax.eval_shape(lambda: model_state.init_state(cfg, layout, len(meta["style_names"]), jax.random.key(0)))
     return cfg, layout, like

@@ -1,7 +1,7 @@
 """Inference exports: a trained G in one small file, and the model shipped with the package.
 
 An export is an .npz holding what generation and analysis need and nothing else:
-- `g/<path>`: G's parameters (the moving average by default, see train.state.inference_state),
+- `g/<path>`: G's parameters (the moving average by default, see model.state.inference_state),
   Latent Transform included, float32, one entry per leaf of `state.g_params`;
 - `meta`: the checkpoint's meta as JSON (config, style names, skeleton layout, fps), without the
   machine-specific data directory;
@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from motiongan_jax import atomic
-from motiongan_jax.train import checkpoint
+from motiongan_jax.model import checkpoint
 
 SHIPPED_MODEL = Path(__file__).resolve().parent.parent / "weights" / "small.npz"
 FORMAT = "motiongan_jax inference export"
