@@ -269,9 +269,9 @@ def test_style_search_refuses_a_motion_without_steps(run):
         search_lib.search_style(state, codes, meta["style_names"], t, loss="nope")
 
 
-# the shipped model's searches here: 3 of search.STEPS' 30 (the tests' XLA options compile fast and
-# run G's steps slowly; the screen of every style as it is and a few steps find the styles below;
-# docs/RESULTS.md measures the full search)
+# the shipped model's searches here: 3 of search.STEPS' 30 (each step is G's backward pass; the
+# screen of every style as it is and a few steps find the styles below; docs/RESULTS.md measures the
+# full search)
 SEARCH_STEPS = 3
 
 

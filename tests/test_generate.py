@@ -622,7 +622,7 @@ def test_cli_style_from_a_clip_walks_its_recovered_mix(cli, tmp_path, capsys):
     as a mix, and walks that mix (the same w as --style with the printed text) at the clip's speed."""
     clip = synthetic.default_dataset_dir() / "OldMan_05.bvh"
     out = tmp_path / "like.npz"
-    # 3 search steps: the tests' unoptimised XLA runs G's steps slowly (test_analysis.SEARCH_STEPS)
+    # 3 search steps, as test_analysis.SEARCH_STEPS
     assert cli(["--style-from", str(clip), "--curve", "line", "--length", "3", "--out", str(out),
                 "--search-steps", "3"]) == 0
     err = capsys.readouterr().err
