@@ -696,7 +696,7 @@ def test_train_step_teaches_a_stride_that_follows_speed():
     cfg = validate(dataclasses.replace(cfg0, model=dataclasses.replace(
         cfg0.model, walker=dataclasses.replace(cfg0.model.walker, stride_speed=True))))
     batch = _batch()
-    state0 = train_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
+    state0 = model_state.init_state(cfg, LAYOUT, C, jax.random.key(0))
     state, m = jax.jit(step_lib.make_train_step(cfg, LAYOUT, C, gait)).lower(state0, batch, GAIT_KEY).compile(
         compiler_options=FAST)(state0, batch, GAIT_KEY)
     chex.assert_tree_all_finite(m)
