@@ -253,6 +253,11 @@ def test_style_search_recovers_a_known_mix(run):
     assert found.nearest[0][0] == "b" and found.mix()[0][0] == "b"
     text = found.mix_text()
     assert styles_lib.parse_style(text, ["a", "b", "c"]).kind == "mix" and text.startswith("b:0.7")
+    # rounded alone these weights sum to 0.999 (0.843 + 2 x 0.078), which the style language would
+    # renormalise to 0.844: the largest takes the remainder, and the text reads back as itself
+    odd = dataclasses.replace(found, weights_C=np.array([0.0783, 0.8434, 0.0783]))
+    assert odd.mix() == [["b", 0.844], ["a", 0.078], ["c", 0.078]]
+    assert styles_lib.parse_style(odd.mix_text(), ["a", "b", "c"]).text == odd.mix_text() == "b:0.844,a:0.078,c:0.078"
     chex.assert_shape(found.history_KxS, (2, search_lib.STEPS))
     jax.tree.map(np.testing.assert_array_equal, before, jax.tree.map(np.array, state.g_params))
 

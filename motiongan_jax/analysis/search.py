@@ -160,7 +160,11 @@ class StyleFound:
         to `digits` decimals and renormalised: the style as the style language writes a mix."""
         order = [int(i) for i in np.argsort(-self.weights_C, kind="stable") if self.weights_C[i] >= at_least]
         total = float(np.sum(self.weights_C[order]))
-        return [[self.style_names[i], round(float(self.weights_C[i]) / total, digits)] for i in order]
+        weights = [round(float(self.weights_C[i]) / total, digits) for i in order]
+        # the largest takes what rounding left over, so the weights sum to 1 and the style language,
+        # which renormalises a mix, reads back these same weights (0.843 + 2 x 0.078 would read as 0.844)
+        weights[0] = round(1.0 - sum(weights[1:]), digits)
+        return [[self.style_names[i], w] for i, w in zip(order, weights)]
 
     def mix_text(self) -> str:
         """The found style for --style and the page: "A:0.62,B:0.31,C:0.07"."""
