@@ -35,18 +35,28 @@ class GaitTargets:
     toe_joints: tuple[int, int]  # kept-joint indices of the left and right toe
 
 
+def toe_heights(root_Fx3, pose_FxR, layout: RowLayout, toes: tuple[int, int]) -> np.ndarray:
+    """Heights (F, 2) of the two toes of a motion's rows above its floor (gait.toe_heights)."""
+    return gait.toe_heights(np.asarray(from_rows(root_Fx3, pose_FxR, layout))[:, list(toes)])
+
+
 def clip_toe_heights(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> np.ndarray:
-    """Heights (F, 2) of the two toes above the clip's floor (gait.toe_heights)."""
-    return gait.toe_heights(np.asarray(from_rows(clip.root_Fx3, clip.pose_FxR, layout))[:, list(toes)])
+    """Heights (F, 2) of the two toes above the clip's floor (`toe_heights`)."""
+    return toe_heights(clip.root_Fx3, clip.pose_FxR, layout, toes)
+
+
+def speed_and_stride(root_Fx3, heights_Fx2: np.ndarray, fps: float) -> tuple[float, float]:
+    """(travel speed m/s, stride length m) of a motion with toe heights `heights_Fx2`: the root path
+    averaged over one gait cycle (gait.travel_speed_mps: no sway, no slowing at the ends), and that
+    speed over the step frequency (gait.step_frequency_hz); nan without steps."""
+    freq = gait.step_frequency_hz(heights_Fx2, fps)
+    speed = gait.travel_speed_mps(root_Fx3, fps, freq)
+    return (speed, speed / freq) if np.isfinite(speed) and speed > 0 else (float("nan"), float("nan"))
 
 
 def clip_speed_and_stride(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> tuple[float, float]:
-    """(travel speed m/s, stride length m) of a clip: the root path averaged over one gait cycle
-    (gait.travel_speed_mps: no sway, no slowing at the ends), and that speed over the step
-    frequency (gait.step_frequency_hz); nan without steps."""
-    freq = gait.step_frequency_hz(clip_toe_heights(clip, layout, toes), clip.fps)
-    speed = gait.travel_speed_mps(clip.root_Fx3, clip.fps, freq)
-    return (speed, speed / freq) if np.isfinite(speed) and speed > 0 else (float("nan"), float("nan"))
+    """(travel speed m/s, stride length m) of a clip (`speed_and_stride`)."""
+    return speed_and_stride(clip.root_Fx3, clip_toe_heights(clip, layout, toes), clip.fps)
 
 
 def clip_stride_m(clip: Clip, layout: RowLayout, toes: tuple[int, int]) -> float:
@@ -71,7 +81,7 @@ def gait_phase(root_Fx3, pose_FxR, layout: RowLayout, toes: tuple[int, int], fps
     detrended and smoothed. It rises 2π per gait cycle and is 0 where the left toe is highest above
     the right. Frames where the steps fade (standing, a start or a stop) are not `valid`: their
     angle is noise."""
-    h = gait.toe_heights(np.asarray(from_rows(root_Fx3, pose_FxR, layout))[:, list(toes)])
+    h = toe_heights(root_Fx3, pose_FxR, layout, toes)
     d = h[:, 0] - h[:, 1]
     d = d - uniform_filter1d(d, max(int(round(PHASE_DETREND_S * fps)), 1), mode="nearest")
     d = gaussian_filter1d(d, PHASE_SMOOTHING_S * fps, mode="nearest")
@@ -84,7 +94,12 @@ def gait_phase(root_Fx3, pose_FxR, layout: RowLayout, toes: tuple[int, int], fps
 def contact_height(clips: list[Clip], layout: RowLayout, toes: tuple[int, int]) -> float:
     """The contact height (metres) calibrated on real clips: CONTACT_PERCENTILE of their toe
     heights above each clip's floor, pooled, plus CONTACT_MARGIN_M."""
-    heights = np.concatenate([clip_toe_heights(c, layout, toes).ravel() for c in clips])
+    return contact_height_of([clip_toe_heights(c, layout, toes) for c in clips])
+
+
+def contact_height_of(heights_by_clip: list[np.ndarray]) -> float:
+    """`contact_height` from each clip's toe heights (F, 2)."""
+    heights = np.concatenate([h.ravel() for h in heights_by_clip])
     return gait.contact_height_threshold(heights, CONTACT_PERCENTILE) + CONTACT_MARGIN_M
 
 
@@ -110,9 +125,10 @@ def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLay
     toes = foot_joints(layout)
     by_style: dict[str, list[tuple[float, float]]] = {s: [] for s in style_names}
     heights_by_style: dict[str, list[float]] = {s: [] for s in style_names}
-    for clip in clips:
-        by_style[clip.label.style].append(clip_speed_and_stride(clip, layout, toes))
-        heights_by_style[clip.label.style].append(gait.step_amplitude_m(clip_toe_heights(clip, layout, toes)))
+    heights_by_clip = [clip_toe_heights(clip, layout, toes) for clip in clips]  # one FK pass per clip
+    for clip, h in zip(clips, heights_by_clip):
+        by_style[clip.label.style].append(speed_and_stride(clip.root_Fx3, h, clip.fps))
+        heights_by_style[clip.label.style].append(gait.step_amplitude_m(h))
     log_speeds, log_strides = [], []
     for style in style_names:
         vals = np.array([v for v in by_style[style] if np.all(np.isfinite(v))], np.float64).reshape(-1, 2)
@@ -128,4 +144,4 @@ def gait_targets(clips: list[Clip], style_names: tuple[str, ...], layout: RowLay
         strides.append(float(np.exp(np.median(y - slope * (x - centre)))))  # at the median speed
     step_heights = tuple(float(np.median(heights_by_style[style])) for style in style_names)
     return GaitTargets(tuple(strides), tuple(speeds), step_heights, slope, float(sample_hz),
-                       contact_height(clips, layout, toes), toes)
+                       contact_height_of(heights_by_clip), toes)
