@@ -631,7 +631,7 @@ def test_bad_steer_requests_are_4xx_naming_the_problem(steer_app, path, change, 
     r = _post(client, f"/api/steer/{path}", body)
     assert r.status_code == status, r.get_json()
     assert re.search(match, r.get_json()["error"]), r.get_json()["error"]
-    # the walker still steps after a refused request (unless the session was the problem)
+    # the walker still steps after a refused request (unless its walker id, "session", was what was refused)
     assert _post(client, "/api/steer/step", good).status_code == 200
 
 
