@@ -61,6 +61,12 @@ def style_codes(model, labels_B, z_BxZ=None) -> jax.Array:
     return _style_codes_jit(generator_state(model), labels_B, z)
 
 
+def _f32(a):
+    """numpy float32 (None stays None): the callers' arrays, whatever made them, share one compiled
+    program per shape."""
+    return None if a is None else np.asarray(a, np.float32)
+
+
 @jax.jit
 def g_apply(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None, phase_BxT=None):
     """(root_vel_BxTx3, pose_BxTxR) of G for style codes w along curve velocities (metres per
@@ -72,8 +78,7 @@ def g_apply(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None, phase_BxT=None):
 def apply_code(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None, phase_BxT=None):
     """`g_apply` on G's part of the model, inputs through numpy (arrays from any computation
     share one compiled program per shape)."""
-    f32 = lambda a: None if a is None else np.asarray(a, np.float32)  # noqa: E731
-    return g_apply(generator_state(model), f32(curve_vel_BxTx3), f32(w_BxD), f32(phase_offset_B), f32(phase_BxT))
+    return g_apply(generator_state(model), _f32(curve_vel_BxTx3), _f32(w_BxD), _f32(phase_offset_B), _f32(phase_BxT))
 
 
 @jax.jit
@@ -85,8 +90,7 @@ def stride_m(model, w_BxD, curve_vel_BxTx3=None) -> np.ndarray:
     """The stride length (metres) of each style code, for a G with a gait clock: λ(w) (B), or for a
     stride that follows speed (model.walker.stride_speed) λ(w, v) at each sample of the curve
     velocities (B x T)."""
-    curve = None if curve_vel_BxTx3 is None else np.asarray(curve_vel_BxTx3, np.float32)
-    return np.asarray(_stride_m(generator_state(model), np.asarray(w_BxD, np.float32), curve))
+    return np.asarray(_stride_m(generator_state(model), _f32(w_BxD), _f32(curve_vel_BxTx3)))
 
 
 @jax.jit
