@@ -254,16 +254,22 @@ def _compilation_cache(tmp_path_factory):
 
     path = _shared_root(tmp_path_factory) / "jax_compilation_cache"
     path.mkdir(exist_ok=True)
-    old = os.environ.get("JAX_COMPILATION_CACHE_DIR")
-    old_config = jax.config.jax_compilation_cache_dir
-    os.environ["JAX_COMPILATION_CACHE_DIR"] = str(path)
-    jax.config.update("jax_compilation_cache_dir", str(path))
+    # every program, not only those over JAX's 1 s: each tool a test starts compiles dozens of
+    # small ones (the init, the batch sampler, the codes) that an earlier process already has
+    settings = {"JAX_COMPILATION_CACHE_DIR": ("jax_compilation_cache_dir", str(path)),
+                "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": ("jax_persistent_cache_min_compile_time_secs", 0.0)}
+    old = {env: os.environ.get(env) for env in settings}
+    old_config = {name: getattr(jax.config, name) for name, _ in settings.values()}
+    for env, (name, value) in settings.items():
+        os.environ[env] = str(value)
+        jax.config.update(name, value)
     yield
-    jax.config.update("jax_compilation_cache_dir", old_config)
-    if old is None:
-        os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
-    else:
-        os.environ["JAX_COMPILATION_CACHE_DIR"] = old
+    for env, (name, _) in settings.items():
+        jax.config.update(name, old_config[name])
+        if old[env] is None:
+            os.environ.pop(env, None)
+        else:
+            os.environ[env] = old[env]
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -60,8 +60,11 @@ def main(argv=None) -> int:
 
             print(describe(cfg))
             return 0
+        from motiongan_jax.cli import use_compilation_cache
         from motiongan_jax.generate.preview import previewer
         from motiongan_jax.train.loop import NonFiniteError, train
+
+        use_compilation_cache()  # a resumed run loads the step its first run compiled
 
         # several processes: from the flags, the variables or the launcher (docs/PERFORMANCE.md)
         parallel.initialize_distributed(args.coordinator, args.num_processes, args.process_id)

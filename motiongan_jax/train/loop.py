@@ -165,6 +165,9 @@ def train(cfg: Config, workdir: str | Path, *, progress: bool = True, log=print,
         log(f"data parallel over {jax.device_count()} devices in {jax.process_count()} process(es)")
     else:
         train_step = jax.jit(keyed_step, donate_argnums=0)
+        # committed to the device as a restored state is: a fresh run and a resumed one then
+        # compile one program, which a resume finds in the compilation cache
+        state = jax.device_put(state, jax.sharding.SingleDeviceSharding(jax.local_devices()[0]))
         step_key = k_step
 
     mngr = checkpoint.manager(workdir / "checkpoints", keep=cfg.train.keep_checkpoints)
