@@ -24,7 +24,8 @@ a, b = (ocp.StandardCheckpointer().restore(os.path.abspath(wd + d + "/checkpoint
         for d in ("/unbroken", "/resumed"))
 la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
 print(json.dumps({"leaves": len(la), "equal": sum(np.array_equal(x, y) for x, y in zip(la, lb)),
-                  "xla_flags": os.environ.get("XLA_FLAGS")}))
+                  "xla_flags": os.environ.get("XLA_FLAGS"),
+                  "steps_compiled": sum(f.startswith("jit_keyed_step-") for f in os.listdir(sys.argv[2]))}))
 """
 
 
@@ -32,7 +33,7 @@ def test_resume_equals_unbroken_compiled_as_users_compile(tmp_path):
     """The suite compiles with faster XLA options (conftest.FAST); users compile with XLA's defaults.
     Resumed ≡ unbroken holds there too: a process with no XLA_FLAGS trains the tiny config (with a
     moving average of G) 4 steps unbroken and 2 + 2 steps resumed, and every leaf of the two states
-    is equal."""
+    is equal; the resumed run's step program is the unbroken run's."""
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR")}
     out = subprocess.run([sys.executable, "-c", DEFAULT_XLA_RESUME, str(tmp_path), str(tmp_path / "xla_cache")],
                          env=env, capture_output=True, text=True, timeout=600)
@@ -40,3 +41,6 @@ def test_resume_equals_unbroken_compiled_as_users_compile(tmp_path):
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["xla_flags"] is None
     assert result["leaves"] > 300 and result["equal"] == result["leaves"], result
+    # a resumed run's step is the fresh run's program (its state committed to the device as a
+    # restored one is), so the three trainings compile it once and load it twice
+    assert result["steps_compiled"] == 1, result
