@@ -32,7 +32,6 @@ GanLoss = Literal["bce_prob", "bce_logit"]
 ConvImpl = Literal["fast", "xla"]
 ComputeDtype = Literal["float32", "bfloat16"]
 RecZ = Literal["zero", "sampled"]
-JerkBound = Literal["above", "both"]
 
 
 def choices(literal) -> tuple[str, ...]:
@@ -179,9 +178,6 @@ class TrainConfig:
     # Joint jerk (0 in the paper): how far each world joint's mean squared third difference exceeds
     # the same joint's in the real windows, summed over joints (losses.joint_jerk_excess).
     w_g_joint_jerk: float = 0.0
-    # "above" pays only a joint's jerk above the real batch's; "both" pays its distance either way:
-    # against a noisy batch the one-sided bound settles below the data's level (RESULTS §26).
-    joint_jerk_bound: JerkBound = "above"
     w_d_adv: float = 1.0
     w_d_cls: float = 5.0
     # Number of points of the curve loss (paper: 4).
@@ -367,8 +363,6 @@ def validate(cfg: Config, *, need_data: bool = True) -> Config:
          "needs model.walker.gait_phase (a stride head to follow the speed)")
     need(t.w_g_rec == 0 or t.batch_size >= 2, "train.w_g_rec", "needs train.batch_size >= 2 (half is reconstructed)")
     need(t.rec_z == "zero" or t.w_g_rec > 0, "train.rec_z", "needs train.w_g_rec > 0 (a half to reconstruct)")
-    need(t.joint_jerk_bound == "above" or t.w_g_joint_jerk > 0, "train.joint_jerk_bound",
-         "needs train.w_g_joint_jerk > 0 (a jerk term to bound)")
     need(t.keep_checkpoints >= 1, "train.keep_checkpoints", "must be >= 1")
     return cfg
 
@@ -538,12 +532,10 @@ def small() -> Config:
 
 
 def bandai_small() -> Config:
-    """`small`'s model and training on `bandai`'s data, with T 32 (a 2.1 s window at 15 Hz); the
-    joint jerk held to the data's level both ways (the one-sided bound left its walks smoother than
-    the real clips: jerk ratio 0.63-0.67 on three seeds, RESULTS §26)."""
+    """`small`'s model and training on `bandai`'s data, with T 32 (a 2.1 s window at 15 Hz)."""
     b, s = bandai(), small()
     return dataclasses.replace(b, name="bandai_small", data=dataclasses.replace(b.data, frame_nums=64),
-                               model=s.model, train=dataclasses.replace(s.train, joint_jerk_bound="both"))
+                               model=s.model, train=s.train)
 
 
 def tiny() -> Config:

@@ -275,18 +275,6 @@ def test_world_joints_and_joint_jerk_excess_by_hand():
     real_jerky_pose = real_pose_BxTxR.at[..., 3].add(2 * a * sign_T)
     got = float(losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, real_jerky_pose, unit))
     assert got == pytest.approx(64 * a**2 / unit**2, rel=1e-4)
-    # both ways: the joint smoother than the data pays too (joint 2's x row alternates ±2a in the
-    # real batch: Δ³ = ±16a, 256 a² against the fake's 0), beside joint 1's excess of 64 a²
-    got = float(losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, real_jerky_pose, unit,
-                                         both_ways=True))
-    assert got == pytest.approx((64 + 256) * a**2 / unit**2, rel=1e-4)
-    # and a gradient step on it makes the smooth joint jerkier (its jerk, not only the loss, moves)
-    g2 = jax.grad(lambda p: losses.joint_jerk_excess(vel_BxTx3, p, vel_BxTx3, real_jerky_pose,
-                                                     both_ways=True))(fake_pose_BxTxR + 1e-3 * real_jerky_pose)
-    nudged = fake_pose_BxTxR + 1e-3 * real_jerky_pose - 0.01 * g2
-    def jerk_J(p):
-        return jnp.mean(jnp.sum(jnp.square(jnp.diff(losses.world_joints(vel_BxTx3, p), n=3, axis=1)), -1), (0, 1))
-    assert float(jerk_J(nudged)[2]) > float(jerk_J(fake_pose_BxTxR + 1e-3 * real_jerky_pose)[2])
     # only the excess counts, no gradient reaches the real batch, and a gradient step lowers it
     assert float(losses.joint_jerk_excess(vel_BxTx3, real_pose_BxTxR, vel_BxTx3, fake_pose_BxTxR)) == 0.0
     g_real = jax.grad(lambda p: losses.joint_jerk_excess(vel_BxTx3, fake_pose_BxTxR, vel_BxTx3, p))(real_pose_BxTxR)

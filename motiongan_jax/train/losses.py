@@ -170,18 +170,16 @@ def root_jerk_excess(fake_vel_BxTx3: jax.Array, real_vel_BxTx3: jax.Array, unit:
 
 
 def joint_jerk_excess(fake_vel_BxTx3: jax.Array, fake_pose_BxTxR: jax.Array, real_vel_BxTx3: jax.Array,
-                      real_pose_BxTxR: jax.Array, unit: float = 1.0, both_ways: bool = False) -> jax.Array:
+                      real_pose_BxTxR: jax.Array, unit: float = 1.0) -> jax.Array:
     """Σ_j max(0, E‖Δ³x_fake,j‖² − E‖Δ³x_real,j‖²) in `unit`s², over the world joints x
     (world_joints, root included), each against the same joint of the real batch: pooled over
-    joints, the joints smoother than the data would hide the others' excess (docs/RESULTS.md §19).
-    `both_ways`: Σ_j |E‖Δ³x_fake,j‖² − E‖Δ³x_real,j‖²|, a joint smoother than the data paying as one
-    as jerkier does (config.TrainConfig.joint_jerk_bound "both")."""
+    joints, the joints smoother than the data would hide the others' excess (docs/RESULTS.md §19)."""
     def per_joint(vel_BxTx3, pose_BxTxR):
         jerk_BxTm3xJx3 = jnp.diff(world_joints(vel_BxTx3, pose_BxTxR), n=3, axis=1)
         return jnp.mean(jnp.sum(jnp.square(jerk_BxTm3xJx3), axis=-1), axis=(0, 1))
     excess_J = per_joint(fake_vel_BxTx3, fake_pose_BxTxR) - jax.lax.stop_gradient(
         per_joint(real_vel_BxTx3, real_pose_BxTxR))
-    return jnp.sum(jnp.abs(excess_J) if both_ways else jax.nn.relu(excess_J)) / unit**2
+    return jnp.sum(jax.nn.relu(excess_J)) / unit**2
 
 
 def stride_loss(log_stride: jax.Array, labels_B: jax.Array, gait, step_m_BxT: jax.Array | None = None) -> jax.Array:

@@ -78,8 +78,7 @@ def g_losses(d: Discriminator, fake_vel_BxTx3, fake_pose_BxTxR, fake_labels_B, b
         terms["root_jerk"] = losses.root_jerk_excess(fake_vel_BxTx3, real_vel_BxTx3, length_unit)
     if "joint_jerk" in active:
         terms["joint_jerk"] = losses.joint_jerk_excess(fake_vel_BxTx3, fake_pose_BxTxR, real_vel_BxTx3,
-                                                       real_pose_BxTxR, length_unit,
-                                                       both_ways=train_cfg.joint_jerk_bound == "both")
+                                                       real_pose_BxTxR, length_unit)
     if "stride" in active:
         terms["stride"] = losses.stride_loss(log_stride, fake_labels_B, gait,
                                              walked_step(trajectory.velocity(batch["curve_BxTx3"])))
