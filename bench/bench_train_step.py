@@ -89,7 +89,9 @@ def peak_device_memory() -> str:
     return f"; peak device memory {peak / 2**30:.2f} GiB" if peak else ""
 
 
-def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
+def compiled_step(cfg, layout, num_styles, impl="fast", dtype="float32"):
+    """(compiled step, fresh state, fake batch, compile seconds, XLA's flop count) of `cfg`'s
+    training step at its batch size and window, the state donated."""
     B, T = cfg.train.batch_size, cfg.data.window_T
     state = model_state.init_state(cfg, layout, num_styles, jax.random.key(0), impl=impl, dtype=dtype)
     step_fn = jax.jit(bench_step_fn(cfg, layout, num_styles), donate_argnums=0)
@@ -100,6 +102,12 @@ def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
     cost = compiled.cost_analysis()
     cost = cost[0] if isinstance(cost, (list, tuple)) else cost
     flops = float(cost.get("flops", float("nan"))) if cost else float("nan")
+    return compiled, state, batch, compile_s, flops
+
+
+def bench(name, cfg, layout, num_styles, repeats, impl, dtype="float32"):
+    B, T = cfg.train.batch_size, cfg.data.window_T
+    compiled, state, batch, compile_s, flops = compiled_step(cfg, layout, num_styles, impl, dtype)
     state, m = compiled(state, batch, jax.random.key(3))  # warm-up
     jax.block_until_ready(m)
     times, cpu = [], []

@@ -12,12 +12,14 @@ def load() -> str:
     return "load %.2f %.2f %.2f" % os.getloadavg()
 
 
+def timed(fn, *args) -> float:
+    """Wall seconds of one call of `fn(*args)`, its result waited for (JAX's asynchronous dispatch)."""
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(*args))
+    return time.perf_counter() - t0
+
+
 def median_time(fn, *args, repeats: int = 3) -> float:
     """Median wall seconds of `fn(*args)` after one untimed call (compilation, first touch)."""
     jax.block_until_ready(fn(*args))
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return statistics.median(timed(fn, *args) for _ in range(repeats))

@@ -1,5 +1,5 @@
 """The package's layers, read from its imports (every import, also those inside functions): no
-module imports one of a higher layer, and the imports form no circle.
+module imports one of a higher layer, the imports form no circle, and none imports PyTorch.
 
 Layers, bottom up (docs/DESIGN.md §1): a module may import its own layer and those below.
 """
@@ -82,6 +82,31 @@ def circles(graph: dict[str, set[str]]) -> list[list[str]]:
         if m not in state:
             visit(m)
     return found
+
+
+def foreign_imports(top: str, package: Path = PACKAGE) -> list[str]:
+    """The package's modules that import `top` (or a module under it), anywhere in the file."""
+    found = set()
+    for path in package.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = ([node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0
+                     else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            if any(n == top or n.startswith(top + ".") for n in names):
+                found.add(_module_name(path, package))
+    return sorted(found)
+
+
+def test_the_package_never_imports_torch():
+    # PyTorch is the benchmarks' optional dependency (pyproject's `bench` extra), never the package's
+    assert foreign_imports("torch") == []
+
+
+def test_the_foreign_import_check_finds_a_lazy_one(tmp_path):
+    root = tmp_path / "motiongan_jax" / "nn"
+    root.mkdir(parents=True)
+    (root / "a.py").write_text("def f():\n    import torch.nn.functional as F\n")
+    (root / "b.py").write_text("import torchvision\n")
+    assert foreign_imports("torch", root.parent) == ["motiongan_jax.nn.a"]
 
 
 def test_every_part_of_the_package_has_a_layer():
