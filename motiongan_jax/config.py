@@ -532,12 +532,10 @@ def small() -> Config:
 
 
 def bandai_small() -> Config:
-    """`small`'s model and training on `bandai`'s data, with T 32 (a 2.1 s window at 15 Hz), and
-    a lighter joint jerk bound: at `small`'s weight its walks ended smoother than its real clips
-    (jerk ratio 0.63-0.67 on three seeds, RESULTS §26)."""
+    """`small`'s model and training on `bandai`'s data, with T 32 (a 2.1 s window at 15 Hz)."""
     b, s = bandai(), small()
     return dataclasses.replace(b, name="bandai_small", data=dataclasses.replace(b.data, frame_nums=64),
-                               model=s.model, train=dataclasses.replace(s.train, w_g_joint_jerk=0.25))
+                               model=s.model, train=s.train)
 
 
 def tiny() -> Config:
