@@ -187,7 +187,7 @@ def create_app(engine: engine_lib.Engine) -> Flask:
         out = bounded(engine.clip_style, data, request.args.get("name", "clip.bvh"))
         return jsonify(out)
 
-    walkers = steer_lib.Steering(engine)
+    walkers = steer_lib.SteeredWalkers(engine)
     app.config["walkers"] = walkers
 
     @app.get("/api/steer")

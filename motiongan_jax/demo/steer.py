@@ -92,7 +92,7 @@ def parse_ahead(value) -> np.ndarray:
     return np.stack([_xz(p, f"'ahead': entry {i}") for i, p in enumerate(value)])
 
 
-class Steering:
+class SteeredWalkers:
     """The walkers of one server process (thread-safe). `clock` is injectable for tests."""
 
     def __init__(self, engine: engine_lib.Engine, clock=time.monotonic, max_walkers: int = MAX_WALKERS,
