@@ -276,15 +276,32 @@ def _compilation_cache(tmp_path_factory):
 def _search_at_level_1():
     """The style search's program compiled with SEARCH_OPTIONS in this process (the same function;
     only XLA's code generation differs)."""
-    import jax
-
     from motiongan_jax.analysis import search
 
     original = search._search
-    search._search = jax.jit(original.__wrapped__, static_argnames=("loss", "keep", "steps"),
-                             compiler_options=SEARCH_OPTIONS)
+    search._search = search_at_level_1(original)
     yield
     search._search = original
+
+
+def search_at_level_1(search_fn):
+    """analysis.search._search (`search_fn`, a jitted function) jitted again with SEARCH_OPTIONS."""
+    import jax
+
+    return jax.jit(search_fn.__wrapped__, static_argnames=("loss", "keep", "steps"), compiler_options=SEARCH_OPTIONS)
+
+
+# `python -c SERVE_DEMO ARGS...` is `python -m motiongan_jax.demo ARGS...` with the style search's
+# program at level 1, as in the tests' own processes
+SERVE_DEMO = f"""
+import runpy, sys
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+import conftest
+from motiongan_jax.analysis import search
+search._search = conftest.search_at_level_1(search._search)
+sys.argv[0] = "motiongan_jax.demo"
+runpy.run_module("motiongan_jax.demo", run_name="__main__", alter_sys=True)
+"""
 
 
 @pytest.fixture(scope="session")

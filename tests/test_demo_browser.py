@@ -22,6 +22,7 @@ import time
 import chex
 import numpy as np
 import pytest
+from conftest import SERVE_DEMO
 
 from motiongan_jax.generate import styles
 from motiongan_jax.model import pretrained
@@ -54,9 +55,9 @@ def playwright_api():
 @pytest.fixture(scope="module")
 def demo_server():
     """`python -m motiongan_jax.demo --port 0`: (the URL it prints, its process); stopped afterwards."""
-    # the tests' unoptimised XLA (conftest.FAST) runs G's steps slowly: a clip's search takes 3
-    proc = subprocess.Popen([sys.executable, "-m", "motiongan_jax.demo", "--port", "0", "--no-warm-up",
-                             "--search-steps", "3"],
+    # the tests' unoptimised XLA (conftest.FAST) runs G's steps slowly: a clip's search takes 3,
+    # compiled at level 1 as in the tests' own processes (conftest.SERVE_DEMO)
+    proc = subprocess.Popen([sys.executable, "-c", SERVE_DEMO, "--port", "0", "--no-warm-up", "--search-steps", "3"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     url, lines, deadline = None, [], time.monotonic() + 180
     try:

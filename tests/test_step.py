@@ -639,13 +639,18 @@ def test_g_ema_follows_the_raw_parameters_by_hand_and_leaves_training_unchanged(
     no_average = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, g_ema_decay=0.0))
     assert model_state.init_state(no_average, LAYOUT, C, jax.random.key(0)).g_ema_params is None
     assert _leaves_equal(state0.g_ema_params, state0.g_params)
-    # (that the average never feeds back, training being that of a run without it, is checked bit
-    # for bit through the training loop: tests/test_train.py's resume test)
     raw = [jax.tree.map(np.asarray, state0.g_params)]
     state, plain = state0, state0.replace(g_ema_params=None)
     for i in range(2):
         state, _ = step(state, _batch(), jax.random.key(i))
         raw.append(jax.tree.map(np.asarray, state.g_params))
+    # the average never feeds back: from any other average, the step trains the same, bit for bit
+    other, other_metrics = step(state0.replace(g_ema_params=jax.tree.map(lambda x: 2.0 * x + 1.0, state0.g_ema_params)),
+                                _batch(), jax.random.key(0))
+    first, first_metrics = step(state0, _batch(), jax.random.key(0))
+    assert _leaves_equal(other.replace(g_ema_params=None), first.replace(g_ema_params=None))
+    assert _leaves_equal(other_metrics, first_metrics)
+    assert not _leaves_equal(other.g_ema_params, first.g_ema_params)
     # e0 = p0, e_k = decay e_(k-1) + (1 - decay) p_k, in numpy
     want = raw[0]
     for p in raw[1:]:

@@ -30,14 +30,21 @@ _FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensiv
 
 @functools.lru_cache(maxsize=16)
 def _compiled_init(build: Callable, build_args: tuple, filters: tuple, key_aval, build_kwargs: tuple = ()):
+    """(graphdef, the compiled function key -> states): the module is built once, under jit's
+    trace, which also gives its graphdef (a second build under eval_shape cost as much again)."""
+    graphdefs = []
+
     def arrays(key):
-        return nnx.split(build(*build_args, key, **dict(build_kwargs)), *filters)[1:]
+        graphdef, *states = nnx.split(build(*build_args, key, **dict(build_kwargs)), *filters)
+        graphdefs.append(graphdef)
+        return tuple(states)
 
     lowered = jax.jit(arrays).lower(key_aval)
     try:
-        return lowered.compile(compiler_options=_FAST_COMPILE)
+        compiled = lowered.compile(compiler_options=_FAST_COMPILE)
     except Exception:  # a backend without these debug options: compile normally
-        return lowered.compile()
+        compiled = lowered.compile()
+    return graphdefs[0], compiled
 
 
 def init_split(build: Callable[..., nnx.Module], build_args: tuple, key: jax.Array, *filters,
@@ -49,12 +56,10 @@ def init_split(build: Callable[..., nnx.Module], build_args: tuple, key: jax.Arr
     Returns (graphdef, state for filter 0, state for filter 1, ...). Under a trace (e.g.
     jax.eval_shape of an init) it simply traces `build`.
     """
-    kwargs = dict(build_kwargs)
     if isinstance(key, jax.core.Tracer):  # inside jit / eval_shape: just trace it
-        return nnx.split(build(*build_args, key, **kwargs), *filters)
-    graphdef = nnx.split(nnx.eval_shape(lambda: build(*build_args, key, **kwargs)), *filters)[0]
+        return nnx.split(build(*build_args, key, **dict(build_kwargs)), *filters)
     key_aval = jax.ShapeDtypeStruct(key.shape, key.dtype)
-    compiled = _compiled_init(build, tuple(build_args), tuple(filters), key_aval, tuple(build_kwargs))
+    graphdef, compiled = _compiled_init(build, tuple(build_args), tuple(filters), key_aval, tuple(build_kwargs))
     return (graphdef, *compiled(key))
 
 
