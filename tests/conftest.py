@@ -299,7 +299,6 @@ sys.path.insert(0, {str(Path(__file__).parent)!r})
 import conftest
 from motiongan_jax.analysis import search
 search._search = conftest.search_at_level_1(search._search)
-sys.argv[0] = "motiongan_jax.demo"
 runpy.run_module("motiongan_jax.demo", run_name="__main__", alter_sys=True)
 """
 
