@@ -248,14 +248,14 @@ class Walker:
             pts = np.concatenate([pts, pts[-1:] + np.r_[self._last_dir[0], 0, self._last_dir[1]]
                                   * (self._last_speed / self.rate)])
         pts = pts[:W] if len(pts) >= W else walk.extend_straight(pts, W - len(pts))
-        vel = np.asarray(trajectory.velocity(pts.astype(np.float32)[None]))  # (1, W, 3)
         w = self.style_at(e)[None]
+        vel, ph = model_apply.curve_clock(self.model, pts.astype(np.float32)[None], w)  # (1, W, 3), (1, W)
         i0 = e - s0
-        phase0 = ph = None
+        phase0 = None
         if self.gait:
             # the window's clock set so that sample e keeps the phase it was given (a style blend
             # changes the stride, never the phase already walked)
-            ph = model_apply.walked_phase(self.model, vel, w)[0].astype(np.float64)
+            ph = ph[0].astype(np.float64)
             at_e = self._phase[e - self._base]
             phase0 = np.array([np.mod(at_e - ph[i0], 2 * np.pi)], np.float32)
             ph = at_e + (ph - ph[i0])

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx
 
+from motiongan_jax.motion import trajectory
 from motiongan_jax.nn import Discriminator, Generator
 
 
@@ -105,3 +106,20 @@ def walked_phase(model, curve_vel_BxTx3, w_BxD, phase_offset_B=None) -> np.ndarr
     offset = np.zeros(b, np.float32) if phase_offset_B is None else np.asarray(phase_offset_B, np.float32)
     return np.asarray(_walked_phase(generator_state(model), np.asarray(curve_vel_BxTx3, np.float32),
                                     np.asarray(w_BxD, np.float32), offset))
+
+
+@jax.jit
+def _curve_clock(model, curve_BxTx3, w_BxD):
+    vel = trajectory.velocity(curve_BxTx3)
+    g = generator(model)
+    if not g.has_gait_phase:
+        return vel, None
+    return vel, g.walked_phase(vel, w_BxD, jnp.zeros(curve_BxTx3.shape[0], jnp.float32))
+
+
+def curve_clock(model, curve_BxTx3, w_BxD) -> tuple[np.ndarray, np.ndarray | None]:
+    """(G's input: the velocities of curve points B x T x 3, `walked_phase` from 0 on them, B x T,
+    or None for a G without a clock) in one compiled call: a streamed window's inputs, which
+    would otherwise cost three dispatches and the velocity's operations one by one."""
+    vel, phase = _curve_clock(generator_state(model), _f32(curve_BxTx3), _f32(w_BxD))
+    return np.asarray(vel), None if phase is None else np.asarray(phase)
